@@ -1,0 +1,1 @@
+"""CLI command groups. Each module here exposes ``register(app: typer.Typer)``."""

@@ -1,0 +1,58 @@
+"""``parknss campaign``: generate, describe and import field-test campaigns."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    sub = typer.Typer(
+        help="Generate, describe and import field-test campaigns.", no_args_is_help=True
+    )
+
+    @sub.command("generate")
+    def generate(
+        out: Path = typer.Option(..., "--out", help="Folder to write the campaign to."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the repetition perturbations."),
+        vehicle: Path | None = typer.Option(None, "--vehicle", help="Reference-vehicle YAML."),
+    ) -> None:
+        """Drive the synthetic reference vehicle through the paper's 16-trial campaign."""
+        from parknss.data.io import write_campaign
+        from parknss.reference.campaign import generate_campaign
+
+        campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle, progress=True)
+        write_campaign(campaign, out)
+        typer.echo(f"wrote {len(campaign)} trials to {out}", err=True)
+
+    @sub.command("describe")
+    def describe(
+        path: Path = typer.Argument(..., help="Campaign folder."),
+        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    ) -> None:
+        """Per-trial summary and campaign-level physics checks."""
+        from parknss.data.describe import describe_campaign
+        from parknss.data.io import read_campaign
+
+        summary = describe_campaign(read_campaign(path))
+        if as_json:
+            typer.echo(json.dumps(summary.to_json(), indent=2))
+        else:
+            typer.echo(summary.table())
+
+    @sub.command("import")
+    def import_(
+        src: Path = typer.Argument(..., help="Folder of logs, one file per trial."),
+        out: Path = typer.Option(..., "--out", help="Campaign folder to write."),
+        mapping: Path | None = typer.Option(None, "--mapping", help="Channel-mapping YAML."),
+    ) -> None:
+        """Turn a folder of real logs (.csv, .parquet, .mat) into a validated campaign."""
+        from parknss.data.io import import_folder, write_campaign
+
+        campaign = import_folder(src, mapping=mapping)
+        write_campaign(campaign, out)
+        typer.echo(f"imported {len(campaign)} trials to {out}", err=True)
+
+    app.add_typer(sub, name="campaign")

@@ -1,0 +1,28 @@
+"""The one exception family of parknss.
+
+Every error a user can cause (a bad log, a malformed config, a corrupt checkpoint, an
+impossible request) is raised as a :class:`ParknssError` whose message is one line naming
+the file, the channel and the problem. The CLI prints that line and exits non-zero.
+"""
+
+from __future__ import annotations
+
+
+class ParknssError(Exception):
+    """Base class for user-facing errors: the message is the whole story, in one line."""
+
+
+class DataError(ParknssError):
+    """A log, trial or campaign is malformed (missing channel, NaN, wrong rate, ...)."""
+
+
+class ConfigError(ParknssError):
+    """A configuration file is missing, malformed or out of range."""
+
+
+class CheckpointError(ParknssError):
+    """A model artefact is missing, corrupt or does not match the code that loads it."""
+
+
+class PlanningError(ParknssError):
+    """A scene or planning request is malformed (not: no plan found, which is a result)."""
