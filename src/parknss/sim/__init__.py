@@ -1,0 +1,1 @@
+"""The closed-loop parking simulator: scenes, planning, control, plants, closed loop."""
