@@ -1,0 +1,1 @@
+"""Open-loop error metrics and the ISO/TS 18571 objective rating."""
