@@ -1,0 +1,1 @@
+"""Studies of the paper's evaluation methodology and the executor that runs them."""

@@ -1,0 +1,183 @@
+"""One way to run many independent fits or simulations: a local pool or Ray.
+
+A :class:`Job` names a top-level function by import path (``"package.module:function"``)
+and its keyword arguments, which must be JSON-serialisable; the function returns a
+JSON-serialisable result. Because jobs and results are plain JSON, the same sweep runs
+identically on a local joblib (loky) process pool, in-process (``workers=1``), or on a Ray
+cluster, and every finished job is cached on disk under the hash of its (function,
+arguments), so an interrupted sweep resumes where it stopped. Nothing is ever pickled to
+disk. Each worker uses one torch thread (training is per-op overhead bound).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from parknss.errors import ConfigError, ParknssError
+
+EXECUTORS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One unit of work: ``fn`` is ``"module:function"``, ``kwargs`` JSON-serialisable."""
+
+    fn: str
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    name: str = ""
+
+    def key(self) -> str:
+        """Content hash of the function path and its arguments (the cache key)."""
+        blob = json.dumps({"fn": self.fn, "kwargs": self.kwargs}, sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:24]
+
+
+def resolve(path: str) -> Callable[..., Any]:
+    """Import ``"module:function"`` and return the function."""
+    module, _, attr = path.partition(":")
+    if not module or not attr:
+        raise ConfigError(f"job function {path!r} is not of the form 'module:function'")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"job function {path!r} cannot be imported: {exc}") from exc
+
+
+def execute(job: Job, torch_threads: int = 1) -> Any:
+    """Run one job in the current process with ``torch_threads`` intra-op threads."""
+    os.environ.setdefault("OMP_NUM_THREADS", str(torch_threads))
+    import torch
+
+    torch.set_num_threads(torch_threads)
+    result = resolve(job.fn)(**job.kwargs)
+    json.dumps(result)  # results must be plain JSON: fail here, not in the cache
+    return result
+
+
+class ResultCache:
+    """A folder of ``<key>.json`` results, written atomically."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    def _path(self, job: Job) -> Path:
+        return self.root / f"{job.key()}.json"
+
+    def get(self, job: Job) -> tuple[bool, Any]:
+        p = self._path(job)
+        if not p.is_file():
+            return False, None
+        try:
+            doc = json.loads(p.read_text())
+        except json.JSONDecodeError:
+            return False, None  # a torn write from a killed run: recompute
+        if doc.get("fn") != job.fn or doc.get("kwargs") != job.kwargs:
+            return False, None
+        return True, doc["result"]
+
+    def put(self, job: Job, result: Any) -> None:
+        p = self._path(job)
+        tmp = p.with_suffix(".tmp")
+        tmp.write_text(
+            json.dumps({"fn": job.fn, "kwargs": job.kwargs, "name": job.name, "result": result})
+        )
+        tmp.replace(p)
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    executor: str = "local",
+    workers: int | None = None,
+    cache_dir: str | Path | None = None,
+    address: str | None = None,
+    progress: bool = True,
+    desc: str = "jobs",
+) -> list[Any]:
+    """Run ``jobs`` and return their results in the order given.
+
+    Args:
+        executor: "local" (joblib loky pool; in-process when workers == 1) or "ray".
+        workers: parallel workers (default: the machine's cores).
+        cache_dir: if given, finished results are read from / written to this folder.
+        address: Ray cluster address (``None`` starts a local Ray with ``workers`` CPUs).
+    """
+    if executor not in EXECUTORS:
+        raise ConfigError(f"executor {executor!r} is not one of {EXECUTORS}")
+    workers = max(1, workers or os.cpu_count() or 1)
+    cache = ResultCache(cache_dir) if cache_dir is not None else None
+    results: list[Any] = [None] * len(jobs)
+    todo: list[int] = []
+    for i, job in enumerate(jobs):
+        hit, value = cache.get(job) if cache else (False, None)
+        if hit:
+            results[i] = value
+        else:
+            todo.append(i)
+    bar = tqdm(
+        total=len(jobs),
+        initial=len(jobs) - len(todo),
+        desc=desc,
+        disable=not progress,
+        file=sys.stderr,
+    )
+    runner = _run_ray if executor == "ray" else _run_local
+    for i, value in runner([jobs[i] for i in todo], todo, workers, address):
+        results[i] = value
+        if cache:
+            cache.put(jobs[i], value)
+        bar.update(1)
+    bar.close()
+    return results
+
+
+def _run_local(
+    jobs: list[Job], index: list[int], workers: int, address: str | None
+) -> Iterable[tuple[int, Any]]:
+    if workers == 1 or len(jobs) <= 1:
+        for i, job in zip(index, jobs, strict=True):
+            yield i, execute(job)
+        return
+    from joblib import Parallel, delayed, parallel_config
+
+    with parallel_config(backend="loky", inner_max_num_threads=1):
+        gen = Parallel(n_jobs=workers, return_as="generator")(delayed(execute)(j) for j in jobs)
+        yield from zip(index, gen, strict=True)
+
+
+def _run_ray(
+    jobs: list[Job], index: list[int], workers: int, address: str | None
+) -> Iterable[tuple[int, Any]]:
+    try:
+        import ray
+    except ImportError as exc:
+        raise ParknssError(
+            "executor 'ray' needs the optional extra: pip install 'parknss[ray]'"
+        ) from exc
+    started = not ray.is_initialized()
+    if started:
+        env = {"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}}
+        kwargs = {"address": address} if address else {"num_cpus": workers}
+        ray.init(include_dashboard=False, log_to_driver=False, runtime_env=env, **kwargs)
+    try:
+        remote = ray.remote(num_cpus=1)(execute)
+        # results come back in completion order; they are stored by index
+        refs = {remote.remote(job): i for i, job in zip(index, jobs, strict=True)}
+        pending = list(refs)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                yield refs[ref], ray.get(ref)
+    finally:
+        if started:
+            ray.shutdown()

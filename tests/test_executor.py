@@ -1,0 +1,55 @@
+import json
+
+import pytest
+
+from parknss.errors import ConfigError
+from parknss.experiments.executor import Job, ResultCache, run_jobs
+
+PROBE = "parknss.experiments.probe:probe_fit"
+
+
+def _jobs(n=4):
+    return [Job(PROBE, {"seed": s, "steps": 20}, name=f"s{s}") for s in range(n)]
+
+
+def test_local_pool_equals_in_process():
+    serial = run_jobs(_jobs(), workers=1, progress=False)
+    pooled = run_jobs(_jobs(), workers=2, progress=False)
+    assert serial == pooled
+    assert [r["seed"] for r in serial] == [0, 1, 2, 3]
+    assert len({r["a"] for r in serial}) == 4  # seeds matter
+
+
+def test_cache_resumes_without_recomputing(tmp_path):
+    jobs = _jobs(3)
+    first = run_jobs(jobs[:2], workers=1, cache_dir=tmp_path, progress=False)
+    # poison the cached value: a resumed sweep must read it, not recompute
+    path = tmp_path / f"{jobs[0].key()}.json"
+    doc = json.loads(path.read_text())
+    doc["result"]["a"] = 123.0
+    path.write_text(json.dumps(doc))
+    again = run_jobs(jobs, workers=1, cache_dir=tmp_path, progress=False)
+    assert again[0]["a"] == 123.0
+    assert again[1] == first[1]
+    assert ResultCache(tmp_path).get(jobs[2])[0]
+
+
+def test_torn_cache_file_is_recomputed(tmp_path):
+    job = _jobs(1)[0]
+    (tmp_path / f"{job.key()}.json").write_text('{"fn": "x", "res')
+    (res,) = run_jobs([job], workers=1, cache_dir=tmp_path, progress=False)
+    assert res["seed"] == 0
+
+
+def test_bad_job_path_is_a_clear_error():
+    with pytest.raises(ConfigError, match="module:function"):
+        run_jobs([Job("no_colon_here", {})], workers=1, progress=False)
+    with pytest.raises(ConfigError, match="executor"):
+        run_jobs(_jobs(1), executor="dask", progress=False)
+
+
+def test_ray_matches_local():
+    pytest.importorskip("ray")
+    local = run_jobs(_jobs(3), workers=1, progress=False)
+    remote = run_jobs(_jobs(3), executor="ray", workers=2, progress=False)
+    assert local == remote
