@@ -20,6 +20,9 @@ from parknss.errors import ConfigError
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CONFIG_DIR = REPO_ROOT / "configs"
 MODELS_DIR = REPO_ROOT / "models"
+BUNDLED_CAMPAIGN = REPO_ROOT / "campaigns" / "default"
+SHIPPED_NSS = MODELS_DIR / "nss"
+SHIPPED_CHAIN = MODELS_DIR / "chain"
 
 
 class StrictModel(BaseModel):

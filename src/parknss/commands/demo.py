@@ -7,9 +7,7 @@ from pathlib import Path
 
 import typer
 
-from parknss.config import REPO_ROOT
-
-BUNDLED_CAMPAIGN = REPO_ROOT / "campaigns" / "default"
+from parknss.config import BUNDLED_CAMPAIGN
 
 
 def _log(msg: str) -> None:
