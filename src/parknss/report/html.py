@@ -1,0 +1,80 @@
+"""A self-contained HTML report: tables, embedded PNG figures, findings, config, revision."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
+table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:3px 8px;
+text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+img{max-width:100%;border:1px solid #eee}.yes{color:#060}.no{color:#a00}.na{color:#777}
+pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}
+"""
+
+
+def _cell(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return html.escape(str(v))
+
+
+def _table(t) -> str:
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in t.columns)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in row) + "</tr>" for row in t.rows
+    )
+    return f"<h3>{html.escape(t.title)}</h3><table><tr>{head}</tr>{body}</table>"
+
+
+def _figure(path: Path) -> str:
+    data = base64.b64encode(Path(path).read_bytes()).decode()
+    return f'<p><img alt="{html.escape(Path(path).name)}" src="data:image/png;base64,{data}"></p>'
+
+
+def _finding_row(f) -> str:
+    mark = {True: ("yes", "agrees"), False: ("no", "differs"), None: ("na", "undecided")}
+    cls, word = mark[f.agrees]
+    return (
+        f"<tr><td>{html.escape(f.claim)}</td><td>{html.escape(f.measured)}</td>"
+        f'<td class="{cls}">{word}</td></tr>'
+    )
+
+
+def write_report(
+    path: Path, title: str, sections: list[tuple[Any, Any]], meta: dict[str, Any]
+) -> Path:
+    """Write the report. ``sections`` is a list of (Artefact, ArtefactResult)."""
+    parts = [
+        f"<!doctype html><meta charset='utf-8'><title>{html.escape(title)}</title>",
+        f"<style>{_CSS}</style><h1>{html.escape(title)}</h1>",
+        "<p class='note'>Measured on the synthetic campaign of the parknss reference "
+        "vehicle unless the data path below says otherwise; these are not the paper's "
+        "field-test numbers.</p>",
+    ]
+    findings = [f for _, res in sections for f in res.findings]
+    if findings:
+        rows = "".join(_finding_row(f) for f in findings)
+        parts.append(
+            "<h2>The paper's findings beside this run</h2><table><tr><th>paper</th>"
+            f"<th>measured here</th><th>verdict</th></tr>{rows}</table>"
+        )
+    for art, res in sections:
+        parts.append(
+            f"<h2 id='{art.name}'>{html.escape(art.title)} "
+            f"<small>({html.escape(art.paper_ref)}; {res.wall_s:.1f} s)</small></h2>"
+        )
+        if res.notes:
+            parts.append(f"<p class='note'>{html.escape(res.notes)}</p>")
+        parts.extend(_table(t) for t in res.tables)
+        parts.extend(_figure(p) for p in res.figures)
+    parts.append(
+        "<h2>Run</h2><pre>" + html.escape(json.dumps(meta, indent=2, default=str)) + "</pre>"
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(parts))
+    return path
