@@ -299,3 +299,18 @@ def test_braking_never_reverses_the_motion():
     roll = run(cmds(50, gear=0), QUIET, vx=1.0)["truth_vx"]  # free roll: -c_rr·g exactly
     decel = -np.diff(roll[1:]) / DT
     np.testing.assert_allclose(decel, P0.body.rolling_resistance * G, rtol=1e-9)
+
+
+def test_alt_vehicle_yaml_is_heavier_and_brakes_slower():
+    alt = load_vehicle_params(CONFIG_DIR / "reference_vehicle_alt.yaml")
+    c = cmds(300, gear=0)
+    c[100:, 2] = -1.0  # a brake step at rest
+    t63 = {}
+    for name, p in (("default", QUIET), ("alt", alt)):
+        pr = run(c, p)["truth_brake_pressure"]
+        t63[name] = int(np.argmax(pr >= 0.632 * pr[-1])) - 100
+    assert t63["alt"] > t63["default"] + 5
+    launch = cmds(200, gear=1, torque=80.0)  # same torque, less acceleration
+    a_def = run(launch, QUIET)["truth_vx"][-1]
+    a_alt = run(launch, alt)["truth_vx"][-1]
+    assert a_alt < a_def * (P0.body.mass_kg + 150.0) / P0.body.mass_kg

@@ -36,6 +36,10 @@ def trial_seeds(
     seed: int, maneuver: str, repetition: int, vehicle_seed: int, attempt: int = 0
 ) -> tuple[int, int]:
     """(plan seed, noise seed) of one trial, derived from the campaign and vehicle seeds."""
+    if maneuver not in MANEUVER_CLASSES:
+        raise ConfigError(
+            f"unknown maneuver class {maneuver!r}; expected one of {MANEUVER_CLASSES}"
+        )
     cls = MANEUVER_CLASSES.index(maneuver)
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, cls, int(repetition), int(attempt)])
     plan_seed = int(ss.generate_state(1)[0])
