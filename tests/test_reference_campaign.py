@@ -127,3 +127,25 @@ def test_the_campaign_follows_the_vehicle_yaml():
 def test_unknown_class_is_rejected():
     with pytest.raises(ConfigError, match="park_sideways"):
         generate_trial("park_sideways", 1)
+
+
+def test_the_default_campaign_has_the_papers_shape():
+    """The full 16 trials (about 3 s): classes, lengths, reversals, yaw prior, ratio fit."""
+    from parknss.data.trial import MANEUVER_CLASSES
+    from parknss.reference.campaign import generate_campaign
+    from parknss.vehicle import VehicleGeometry, yaw_rate_ref
+
+    camp = generate_campaign(seed=0)
+    assert camp.meta["synthetic"] is True and len(camp) == 16
+    assert list(camp.by_class()) == list(MANEUVER_CLASSES)
+    assert all([t.repetition for t in ts] == [1, 2, 3, 4] for ts in camp.by_class().values())
+    assert all(LENGTH_RANGE_S[0] <= t.duration_s <= LENGTH_RANGE_S[1] for t in camp)
+    assert 60 <= sum(reversals(t["gear"]) for t in camp) <= 90
+    geom = VehicleGeometry.from_dict(camp.meta["vehicle_geometry"])
+    w, ref = [], []
+    for t in camp:
+        m = moving_mask(t["vx"])
+        w.append(t["yaw_rate"][m])
+        ref.append(yaw_rate_ref(t["vx"][m], t["steer"][m], geom))
+    w, ref = np.concatenate(w), np.concatenate(ref)
+    assert 1.0 - np.sum((w - ref) ** 2) / np.sum((w - w.mean()) ** 2) >= 0.99
