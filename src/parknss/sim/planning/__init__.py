@@ -1,0 +1,1 @@
+"""Parking motion planning: Reeds-Shepp curves, Hybrid A* search and trajectory refinement."""

@@ -1,0 +1,664 @@
+"""Hybrid A* (Dolgov et al. 2010) for parking, bidirectional, with Reeds-Shepp connections.
+
+The search runs on continuous poses (x, y, heading) binned into cells; each cell keeps
+its cheapest pose. Cells are ``xy_resolution_m`` x ``heading_resolution_deg`` in the
+open and the finer ``fine_*`` resolution where the car is within
+``fine_below_clearance_m`` of an obstacle, so a tight slot gets enough distinct states
+for a multi-move manoeuvre without flooding the open lane. Successors are arcs of the
+kinematic bicycle at ``n_steer`` curvatures between the right and left lock (minimum
+turning radius from the steering lock and rack ratio,
+:func:`parknss.vehicle.min_turning_radius`, about 4.6 m), forwards and in reverse. An arc
+that would hit an obstacle is cut back to its last safe pose (to the dense spacing), so
+the car can use all of a tight slot.
+
+Costs: length, times ``reverse_cost`` in reverse, plus ``gear_switch_cost`` per cusp,
+``steer_cost`` per metre at full lock and ``steer_change_cost`` per full lock of steering
+change. The heuristic is the maximum of a holonomic distance with obstacles (Dijkstra on
+a grid, for the rear axle, which must stay W/2 + margin from every obstacle) and the
+Reeds-Shepp length without obstacles (computed lazily, when a node is first popped).
+
+Two trees grow at once, one from the start and one from the goal (driving the manoeuvre
+backwards in time); a node of either tree is connected to the other tree's root, and
+every ``connect_every`` expansions to its ``connect_neighbours`` nearest nodes in the
+other tree, by Reeds-Shepp candidates (shortest first) that pass the collision check.
+Leaving a tight slot backwards is the same geometric problem as entering it, and the
+goal tree solves it while the start tree covers the lane; a single tree (``search``:
+``from_start`` / ``from_goal``) is available for comparison.
+
+Collisions in the search use :class:`~parknss.sim.planning.collision_field.FieldChecker`
+(a distance field with exact vertex tests, near-exact, certified between samples); a
+plan is accepted only after the exact dense check of :mod:`parknss.sim.geometry` (<= 2 cm
+/ 0.5° between poses, exact polygon distances) clears the safety margin. Degenerate
+requests return ``found=False`` with a reason, never an exception.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.sim import geometry
+from parknss.sim.geometry import DenseCheckConfig, point_distance
+from parknss.sim.planning import reeds_shepp as rs
+from parknss.sim.planning.collision_field import FieldChecker
+from parknss.sim.trajectory import Segment, Trajectory
+from parknss.vehicle import VehicleGeometry, min_turning_radius, steer_for_curvature
+
+REASONS = (
+    "ok",
+    "goal off the map",
+    "start off the map",
+    "goal in collision",
+    "start in collision",
+    "goal unreachable",
+    "time budget exhausted",
+    "search space exhausted",
+)
+
+
+class PlanningConfig(StrictModel):
+    """Hybrid A* settings (configs/planning.yaml). Lengths in m, angles in deg."""
+
+    safety_margin_m: float = Field(0.10, ge=0.0, description="min exact clearance, m")
+    xy_resolution_m: float = Field(0.3, gt=0.0)
+    heading_resolution_deg: float = Field(7.5, gt=0.0)
+    fine_xy_resolution_m: float = Field(0.05, gt=0.0)
+    fine_heading_resolution_deg: float = Field(1.0, gt=0.0)
+    fine_below_clearance_m: float = Field(0.3, ge=0.0, description="fine cells below this")
+    n_steer: int = Field(5, ge=2, description="curvatures from right to left lock")
+    primitive_length_m: float = Field(0.8, gt=0.0, description="arc length of a successor")
+    min_primitive_m: float = Field(0.1, gt=0.0, description="shortest cut-back successor")
+    sample_step_m: float = Field(0.1, gt=0.0, description="pose spacing of the search check")
+    reverse_cost: float = Field(1.2, ge=1.0, description="cost factor per metre in reverse")
+    gear_switch_cost: float = Field(1.0, ge=0.0, description="cost per cusp, m")
+    steer_cost: float = Field(0.1, ge=0.0, description="cost per metre at full lock")
+    steer_change_cost: float = Field(0.2, ge=0.0, description="cost per lock-to-centre change")
+    heuristic_weight: float = Field(1.5, ge=1.0)
+    holonomic_resolution_m: float = Field(0.25, gt=0.0)
+    field_resolution_m: float = Field(0.05, gt=0.0, description="distance-field grid, m")
+    field_tolerance_m: float = Field(0.01, ge=0.0, description="interpolation allowance, m")
+    search: Literal["bidirectional", "from_start", "from_goal"] = "bidirectional"
+    analytic_every: int = Field(4, ge=1, description="connect to the other root every n")
+    analytic_always_within_m: float = Field(5.0, ge=0.0, description="...and always this close")
+    connect_every: int = Field(3, ge=1, description="connect to nearest other-tree nodes every n")
+    connect_neighbours: int = Field(2, ge=0, description="nearest other-tree nodes tried")
+    connect_max_m: float = Field(15.0, gt=0.0, description="skip longer connections, m")
+    rs_candidates: int = Field(6, ge=1, description="Reeds-Shepp words checked per connection")
+    start_lead_ins_m: tuple[float, ...] = Field(
+        (4.0, 8.0, 12.0), description="straight lead-ins from the start tried before RS, m"
+    )
+    time_budget_s: float = Field(5.0, gt=0.0)
+    dense: DenseCheckConfig = DenseCheckConfig()
+
+
+def load_planning_config(path: str | Path | None = None) -> PlanningConfig:
+    """Read configs/planning.yaml (or ``path``); defaults when the file is absent."""
+    p = Path(path) if path is not None else CONFIG_DIR / "planning.yaml"
+    return load_config(PlanningConfig, p if (path is not None or p.is_file()) else None)
+
+
+@dataclass
+class PlanStats:
+    """Counters and timings of one plan (s)."""
+
+    expansions: int = 0
+    nodes: int = 0
+    connections_tried: int = 0
+    rs_checked: int = 0
+    rejected_by_exact_check: int = 0
+    setup_time_s: float = 0.0
+    search_time_s: float = 0.0
+    verify_time_s: float = 0.0
+    time_s: float = 0.0
+
+
+@dataclass
+class PlanResult:
+    """Outcome of a plan: ``found`` with a trajectory, or a reason why not."""
+
+    found: bool
+    reason: str
+    trajectory: Trajectory | None = None
+    stats: PlanStats = field(default_factory=PlanStats)
+    detail: str = ""
+    min_clearance_m: float = math.nan
+
+    def to_json(self) -> dict:
+        """JSON-serialisable summary (no poses)."""
+        t = self.trajectory
+        return {
+            "found": self.found,
+            "reason": self.reason,
+            "detail": self.detail,
+            "length_m": None if t is None else round(t.length, 4),
+            "cusps": None if t is None else t.cusps,
+            "min_clearance_m": None if math.isnan(self.min_clearance_m) else self.min_clearance_m,
+            "stats": dict(self.stats.__dict__),
+        }
+
+
+# ---------------------------------------------------------------------------------------
+# Holonomic heuristic
+
+
+class HolonomicHeuristic:
+    """Shortest rear-axle distance (m) to a target on a grid, around obstacles.
+
+    A cell is free when its centre is at least ``clearance - res/√2`` from every
+    obstacle and from the map edge: a necessary condition for the rear axle of a
+    collision-free car (the disc of radius W/2 around the rear axle lies inside the
+    footprint), so unreachable cells (``inf``) are truly unreachable. ``dist_obstacle``
+    (exact distance of each cell centre to obstacles and map edge) doubles as a
+    broad-phase collision test.
+    """
+
+    def __init__(self, obstacles, bounds, target_xy, clearance: float, res: float) -> None:
+        xmin, ymin, xmax, ymax = bounds
+        self.res = res
+        self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
+        self.nx = max(1, math.floor((xmax - xmin) / res))
+        self.ny = max(1, math.floor((ymax - ymin) / res))
+        gx, gy = np.meshgrid(self.x0 + res * np.arange(self.nx), self.y0 + res * np.arange(self.ny))
+        pts = np.column_stack([gx.ravel(), gy.ravel()])
+        d = np.minimum.reduce(
+            [pts[:, 0] - xmin, xmax - pts[:, 0], pts[:, 1] - ymin, ymax - pts[:, 1]]
+        )
+        for poly in obstacles:
+            d = np.minimum(d, point_distance(pts, poly))
+        self.dist_obstacle = d.reshape(self.ny, self.nx)
+        free = self.dist_obstacle >= clearance - res / math.sqrt(2.0)
+        ti, tj = self._index(*target_xy)
+        free[tj, ti] = True
+        self.dist = self._dijkstra(free, tj * self.nx + ti)
+
+    def _index(self, x: float, y: float) -> tuple[int, int]:
+        i = min(max(round((x - self.x0) / self.res), 0), self.nx - 1)
+        j = min(max(round((y - self.y0) / self.res), 0), self.ny - 1)
+        return i, j
+
+    def _dijkstra(self, free: np.ndarray, source: int) -> np.ndarray:
+        ny, nx = free.shape
+        idx = np.arange(ny * nx).reshape(ny, nx)
+        flat = free.ravel()
+        rows, cols, wts = [], [], []
+        for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            a = idx[: ny - dj, max(0, -di) : nx - max(0, di)].ravel()
+            b = idx[dj:, max(0, di) : nx + min(0, di) or None].ravel()
+            keep = flat[a] & flat[b]
+            rows.append(a[keep])
+            cols.append(b[keep])
+            wts.append(np.full(int(keep.sum()), self.res * math.hypot(di, dj)))
+        r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
+        graph = coo_matrix((w, (r, c)), shape=(ny * nx, ny * nx)).tocsr()
+        return dijkstra(graph, directed=False, indices=source).reshape(ny, nx)
+
+    def __call__(self, x: float, y: float) -> float:
+        i, j = self._index(x, y)
+        return float(self.dist[j, i])
+
+    def obstacle_distance(self, x: float, y: float) -> float:
+        """Lower bound of the distance (m) from (x, y) to obstacles and the map edge."""
+        i, j = self._index(x, y)
+        return float(self.dist_obstacle[j, i]) - self.res / math.sqrt(2.0)
+
+
+# ---------------------------------------------------------------------------------------
+# Search trees
+
+
+@dataclass
+class _Node:
+    pose: tuple[float, float, float]
+    g: float
+    parent: int
+    length: float  # arc length driven from the parent, m
+    direction: int  # search direction of the arriving move (0 at the root)
+    kappa: float
+    h: float
+    key: tuple = ()
+    clr: float = 0.0  # estimated clearance of the pose, m (capped)
+    rs_done: bool = False
+
+
+class _Tree:
+    """One search tree. ``backward``: grown from the goal, search direction = -real."""
+
+    def __init__(self, root: _Node, target, holo: HolonomicHeuristic, backward: bool) -> None:
+        self.backward = backward
+        self.target = target
+        self.holo = holo
+        self.nodes = [root]
+        self.best: dict[tuple, int] = {root.key: 0}
+        self.closed: set[tuple] = set()
+        self.heap: list[tuple[float, int]] = [(0.0, 0)]
+        self.poses = np.zeros((1024, 3))
+        self.poses[0] = root.pose
+        self.expansions = 0
+
+    def add(self, node: _Node, f: float) -> None:
+        self.nodes.append(node)
+        nid = len(self.nodes) - 1
+        if nid >= len(self.poses):
+            self.poses = np.concatenate([self.poses, np.zeros_like(self.poses)])
+        self.poses[nid] = node.pose
+        self.best[node.key] = nid
+        heapq.heappush(self.heap, (f, nid))
+
+    def nearest(self, pose, k: int, radius: float) -> list[int]:
+        """Up to k node ids closest to ``pose`` (xy distance + radius x heading gap)."""
+        n = len(self.nodes)
+        p = self.poses[:n]
+        dth = np.abs((p[:, 2] - pose[2] + np.pi) % (2 * np.pi) - np.pi)
+        d = np.hypot(p[:, 0] - pose[0], p[:, 1] - pose[1]) + radius * dth
+        if n <= k:
+            return [int(i) for i in np.argsort(d)]
+        idx = np.argpartition(d, k)[:k]
+        return [int(i) for i in idx[np.argsort(d[idx])]]
+
+
+# ---------------------------------------------------------------------------------------
+# The planner
+
+
+class HybridAStar:
+    """A reusable planner for one vehicle and config: ``plan(scene)`` -> PlanResult."""
+
+    def __init__(self, cfg: PlanningConfig | None = None, geom: VehicleGeometry | None = None):
+        self.cfg = cfg or PlanningConfig()
+        self.geom = geom or VehicleGeometry()
+        self.radius = min_turning_radius(self.geom)
+        self.kmax = 1.0 / self.radius
+        c = self.cfg
+        n = max(1, math.ceil(c.primitive_length_m / c.sample_step_m - 1e-9))
+        s = np.linspace(0.0, c.primitive_length_m, n + 1)
+        prims, meta = [], []
+        for d in (1, -1):
+            for k in np.linspace(-self.kmax, self.kmax, c.n_steer):
+                prims.append(rs.arc_poses((0.0, 0.0, 0.0), float(k), d * s))
+                meta.append((d, float(k)))
+        self.prim_poses = np.stack(prims)  # (K, n+1, 3) in the frame of the start pose
+        self.prim_meta = meta
+        self._nth = max(1, round(360.0 / c.heading_resolution_deg))
+        self._nth_fine = max(1, round(360.0 / c.fine_heading_resolution_deg))
+
+    # -- helpers ------------------------------------------------------------------------
+
+    def _key(self, pose, clearance: float) -> tuple:
+        c = self.cfg
+        x, y, th = pose
+        fine = clearance < c.fine_below_clearance_m
+        res = c.fine_xy_resolution_m if fine else c.xy_resolution_m
+        nth = self._nth_fine if fine else self._nth
+        a = (th % (2 * math.pi)) / (2 * math.pi) * nth
+        return (fine, math.floor(x / res), math.floor(y / res), math.floor(a) % nth)
+
+    def _move_cost(
+        self,
+        length: float,
+        d_search: int,
+        kappa: float,
+        prev_dir: int,
+        prev_kappa: float,
+        backward: bool,
+    ) -> float:
+        c = self.cfg
+        real = -d_search if backward else d_search
+        cost = length * (c.reverse_cost if real < 0 else 1.0)
+        cost += c.steer_cost * abs(kappa) / self.kmax * length
+        if prev_dir != 0:
+            cost += c.steer_change_cost * abs(kappa - prev_kappa) / self.kmax
+            if prev_dir != d_search:
+                cost += c.gear_switch_cost
+        return cost
+
+    # -- main ---------------------------------------------------------------------------
+
+    def plan(self, scene) -> PlanResult:
+        """Plan from ``scene.start`` to ``scene.goal`` (rear-axle poses) around obstacles."""
+        t0 = time.perf_counter()
+        stats = PlanStats()
+        result = self._plan(scene, stats, t0)
+        result.stats = stats
+        stats.time_s = time.perf_counter() - t0
+        return result
+
+    def _precheck(self, scene, obstacles) -> PlanResult | None:
+        g, m = self.geom, self.cfg.safety_margin_m
+        for name, pose in (("goal", scene.goal), ("start", scene.start)):
+            if not geometry.inside_bounds([pose], g, scene.bounds)[0]:
+                return PlanResult(False, f"{name} off the map", detail=f"{name} {pose}")
+        for name, pose in (("goal", scene.goal), ("start", scene.start)):
+            if obstacles:
+                clr = float(geometry.clearance([pose], g, obstacles)[0])
+                if clr < m:
+                    return PlanResult(
+                        False,
+                        f"{name} in collision",
+                        detail=f"{name} clearance {clr:.3f} m < margin {m:.3f} m",
+                    )
+        return None
+
+    def _plan(self, scene, stats: PlanStats, t0: float) -> PlanResult:
+        c = self.cfg
+        obstacles = scene.obstacle_arrays()
+        early = self._precheck(scene, obstacles)
+        if early is not None:
+            return early
+        start = tuple(float(v) for v in scene.start)
+        goal = tuple(float(v) for v in scene.goal)
+        checker = FieldChecker(
+            obstacles,
+            scene.bounds,
+            self.geom,
+            c.safety_margin_m,
+            resolution=c.field_resolution_m,
+            tolerance=c.field_tolerance_m,
+            max_step=c.dense.max_step_m,
+            max_dheading=math.radians(c.dense.max_dheading_deg),
+        )
+        need = 0.5 * self.geom.width + c.safety_margin_m
+        res = c.holonomic_resolution_m
+        holo_goal = HolonomicHeuristic(obstacles, scene.bounds, goal[:2], need, res)
+        stats.setup_time_s = time.perf_counter() - t0
+        if not math.isfinite(holo_goal(*start[:2])):
+            return PlanResult(
+                False,
+                "goal unreachable",
+                detail="no corridor wide enough for the car joins start and goal",
+            )
+        clr = checker.clearance(np.array([start, goal]))
+        trees = []
+        if c.search != "from_goal":
+            trees.append(_Tree(self._root(start, clr[0], holo_goal), goal, holo_goal, False))
+        if c.search != "from_start":
+            holo_start = HolonomicHeuristic(obstacles, scene.bounds, start[:2], need, res)
+            trees.append(_Tree(self._root(goal, clr[1], holo_start), start, holo_start, True))
+        stats.setup_time_s = time.perf_counter() - t0
+        self._checker = checker
+        self._scene = scene
+        self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
+        self._lip_max = float(self._lips.max())
+        t_search = time.perf_counter()
+        try:
+            return self._search(trees, stats, t0 + c.time_budget_s)
+        finally:
+            stats.search_time_s = time.perf_counter() - t_search - stats.verify_time_s
+
+    def _root(self, pose, clr: float, holo: HolonomicHeuristic) -> _Node:
+        return _Node(pose, 0.0, -1, 0.0, 0, 0.0, holo(*pose[:2]), self._key(pose, clr), clr)
+
+    def _search(self, trees: list[_Tree], stats: PlanStats, deadline: float) -> PlanResult:
+        c = self.cfg
+        # the direct Reeds-Shepp connection first
+        done = self._connect(trees[0], 0, trees[-1] if len(trees) > 1 else None, [0], stats)
+        if done is not None:
+            return done
+        while any(t.heap for t in trees):
+            for i, tree in enumerate(trees):
+                if time.perf_counter() > deadline:
+                    return PlanResult(
+                        False,
+                        "time budget exhausted",
+                        detail=f"{stats.expansions} expansions in {c.time_budget_s} s",
+                    )
+                nid = self._pop(tree)
+                if nid is None:
+                    continue
+                other = trees[1 - i] if len(trees) == 2 else None
+                done = self._expand(tree, nid, other, stats)
+                if done is not None:
+                    return done
+        return PlanResult(
+            False,
+            "search space exhausted",
+            detail=f"{stats.expansions} expansions, no Reeds-Shepp connection",
+        )
+
+    def _pop(self, tree: _Tree) -> int | None:
+        """Pop the best open node (lazy Reeds-Shepp heuristic); None when empty."""
+        w = self.cfg.heuristic_weight
+        while tree.heap:
+            _f, nid = heapq.heappop(tree.heap)
+            node = tree.nodes[nid]
+            key = node.key
+            if key in tree.closed or tree.best.get(key) != nid:
+                continue
+            if not node.rs_done:
+                node.rs_done = True
+                h_rs = rs.shortest_length(node.pose, tree.target, self.radius)
+                if h_rs > node.h + 1e-9:
+                    node.h = h_rs
+                    nf = node.g + w * node.h
+                    if tree.heap and nf > tree.heap[0][0]:
+                        heapq.heappush(tree.heap, (nf, nid))
+                        continue
+            tree.closed.add(key)
+            return nid
+        return None
+
+    def _expand(self, tree: _Tree, nid: int, other: _Tree | None, stats: PlanStats):
+        c = self.cfg
+        node = tree.nodes[nid]
+        tree.expansions += 1
+        stats.expansions += 1
+        # connections: the other root, and nearest nodes of the other tree
+        targets = []
+        if node.h <= c.analytic_always_within_m or (tree.expansions - 1) % c.analytic_every == 0:
+            targets.append(0)
+        if other is not None and c.connect_neighbours and tree.expansions % c.connect_every == 0:
+            for m in other.nearest(node.pose, c.connect_neighbours + 1, self.radius):
+                if m not in targets:
+                    targets.append(m)
+        if targets:
+            done = self._connect(tree, nid, other, targets, stats)
+            if done is not None:
+                return done
+        # successors
+        x0, y0, th0 = node.pose
+        cs, sn = math.cos(th0), math.sin(th0)
+        P = self.prim_poses
+        world = np.empty_like(P)
+        world[..., 0] = x0 + cs * P[..., 0] - sn * P[..., 1]
+        world[..., 1] = y0 + sn * P[..., 0] + cs * P[..., 1]
+        world[..., 2] = th0 + P[..., 2]
+        ch = self._checker
+        cx, cy = x0 + cs * ch.centre_offset, y0 + sn * ch.centre_offset
+        sweep = self._lip_max * c.primitive_length_m
+        if tree.holo.obstacle_distance(cx, cy) > ch.reach + sweep + ch.need:
+            reach = np.full(len(P), float(P.shape[1] - 1))
+        else:
+            verts = ch.vertices_near(cx, cy, ch.reach + sweep + ch.need)
+            reach = ch.reach_along(list(world), self._lips, verts)
+        w = c.heuristic_weight
+        cands = []
+        for k, r in enumerate(reach):
+            length = float(r) * c.sample_step_m
+            if length < c.min_primitive_m - 1e-9:
+                continue
+            d, kap = self.prim_meta[k]
+            j = round(r)
+            if abs(r - j) < 1e-9:
+                pose = (float(world[k, j, 0]), float(world[k, j, 1]), float(world[k, j, 2]))
+            else:
+                pose = tuple(float(v) for v in rs.arc_poses(node.pose, kap, [d * length])[0])
+            cands.append((pose, length, d, kap))
+        if not cands:
+            return None
+        clr = ch.clearance(np.array([p for p, *_ in cands]))
+        for (pose, length, d, kap), cl in zip(cands, clr, strict=True):
+            key = self._key(pose, cl)
+            if key in tree.closed:
+                continue
+            h = tree.holo(pose[0], pose[1])
+            if not math.isfinite(h):
+                continue
+            g = node.g + self._move_cost(length, d, kap, node.direction, node.kappa, tree.backward)
+            old = tree.best.get(key)
+            if old is not None and tree.nodes[old].g <= g:
+                continue
+            tree.add(_Node(pose, g, nid, length, d, kap, h, key, float(cl)), g + w * h)
+            stats.nodes += 1
+        return None
+
+    # -- connections and path assembly ---------------------------------------------------
+
+    def _connect(self, tree: _Tree, nid: int, other: _Tree | None, targets, stats: PlanStats):
+        """Try Reeds-Shepp paths from node ``nid`` of ``tree`` to the other tree's nodes.
+
+        ``targets`` are node ids in ``other`` (0 = its root; with no other tree, 0 means
+        ``tree.target``). Returns a PlanResult when a connection passes every check.
+        """
+        c = self.cfg
+        node = tree.nodes[nid]
+        cands = []
+        for m in targets:
+            mpose = other.nodes[m].pose if other is not None else tree.target
+            a, b = (mpose, node.pose) if tree.backward else (node.pose, mpose)
+            a_is_start = (m if tree.backward else nid) == 0
+            stats.connections_tried += 1
+            for path in rs.all_paths(a, b, self.radius)[: c.rs_candidates]:
+                if path.length <= c.connect_max_m or m == 0:
+                    cands.append((path.length, m, path))
+            if a_is_start:  # "drive on, then manoeuvre": a straight lead-in from the start
+                for d in c.start_lead_ins_m:
+                    lead = (a[0] + d * math.cos(a[2]), a[1] + d * math.sin(a[2]), a[2])
+                    for p in rs.all_paths(lead, b, self.radius)[: c.rs_candidates]:
+                        path = rs.RSPath(
+                            a, b, self.radius, "S" + p.word, (d / self.radius, *p.params)
+                        )
+                        cands.append((path.length, m, path))
+        if not cands:
+            return None
+        cands.sort(key=lambda t: t[0])
+        samples = [a[:, :3] for a in rs.sample_paths([p for *_, p in cands], c.sample_step_m)]
+        stats.rs_checked += len(cands)
+        # cheap reject: corners or obstacle vertices within the margin at every 4th pose
+        ch = self._checker
+        coarse = [s_[::4] for s_ in samples]
+        flat_ok = ch.corners_free(np.concatenate(coarse))
+        splits = np.cumsum([len(s_) for s_ in coarse])[:-1]
+        alive = [i for i, ok in enumerate(np.split(flat_ok, splits)) if ok.all()]
+        if not alive:
+            return None
+        lip = ch.lipschitz(self.kmax)
+        reach = ch.reach_along([samples[i] for i in alive], np.full(len(alive), lip))
+        for i, r in zip(alive, reach, strict=True):
+            if r < len(samples[i]) - 1 - 1e-9:
+                continue
+            _, m, path = cands[i]
+            tv = time.perf_counter()
+            fwd_tree = tree if not tree.backward else other
+            bwd_tree = tree if tree.backward else other
+            fwd_id = nid if not tree.backward else (m if other is not None else None)
+            bwd_id = nid if tree.backward else (m if other is not None else None)
+            traj = self._assemble(fwd_tree, fwd_id, path, bwd_tree, bwd_id)
+            ok, clr = self._verify(traj)
+            stats.verify_time_s += time.perf_counter() - tv
+            if ok:
+                return PlanResult(True, "ok", traj, min_clearance_m=clr)
+            stats.rejected_by_exact_check += 1
+        return None
+
+    def _chain(self, tree: _Tree | None, nid: int | None) -> list[tuple[np.ndarray, int, float]]:
+        """Real-time pieces (poses, real direction, curvature) along a tree's chain.
+
+        For the start tree: root -> nid in driving order. For the goal tree: nid ->
+        root (the goal) in driving order.
+        """
+        if tree is None or nid is None:
+            return []
+        chain = []
+        while nid is not None and nid > 0:
+            chain.append(nid)
+            nid = tree.nodes[nid].parent
+        pieces = []
+        for i in reversed(chain):
+            n = tree.nodes[i]
+            m = max(1, math.ceil(n.length / self.cfg.sample_step_m - 1e-9))
+            s = n.direction * np.linspace(0.0, n.length, m + 1)
+            poses = rs.arc_poses(tree.nodes[n.parent].pose, n.kappa, s)
+            poses[-1] = n.pose
+            pieces.append((poses, n.direction, n.kappa))
+        if tree.backward:
+            pieces = [(p[::-1].copy(), -d, k) for p, d, k in reversed(pieces)]
+        return pieces
+
+    def _assemble(self, fwd: _Tree | None, fid, path: rs.RSPath, bwd: _Tree | None, bid):
+        pieces = self._chain(fwd, fid)
+        for seg in path.segments:
+            n = max(1, math.ceil(abs(seg.length) / self.cfg.sample_step_m - 1e-9))
+            begin = pieces[-1][0][-1] if pieces else np.asarray(path.start, dtype=float)
+            k = seg.curvature(self.radius)
+            pieces.append(
+                (rs.arc_poses(begin, k, np.linspace(0.0, seg.length, n + 1)), seg.direction, k)
+            )
+        if pieces:
+            end = pieces[-1][0]
+            end[-1, :2] = path.goal[:2]
+        pieces += self._chain(bwd, bid)
+        segments: list[Segment] = []
+        cur_p: list[np.ndarray] = []
+        cur_k: list[np.ndarray] = []
+        cur_dir = 0
+        for poses, d, k in pieces:
+            if len(poses) < 2:
+                continue
+            if d != cur_dir and cur_p:
+                segments.append(self._segment(cur_p, cur_k, cur_dir))
+                cur_p, cur_k = [], []
+            body = poses if not cur_p else poses[1:]
+            cur_p.append(body)
+            cur_k.append(np.full(len(body), k))
+            cur_dir = d
+        if cur_p:
+            segments.append(self._segment(cur_p, cur_k, cur_dir))
+        info = {
+            "planner": "hybrid_astar",
+            "search": self.cfg.search,
+            "turning_radius_m": self.radius,
+        }
+        return Trajectory(segments, source="hybrid_astar", info=info)
+
+    def _segment(self, poses: list[np.ndarray], kappa: list[np.ndarray], d: int) -> Segment:
+        p = np.concatenate(poses, axis=0)
+        steer = np.asarray(steer_for_curvature(np.concatenate(kappa), self.geom), dtype=float)
+        return Segment(p, int(d), steer=steer)
+
+    def _verify(self, traj: Trajectory) -> tuple[bool, float]:
+        """Exact dense check of a trajectory: (on the map and clearance >= margin, min m)."""
+        return verify_trajectory(traj, self._scene, self.geom, self.cfg)
+
+
+def verify_trajectory(traj: Trajectory, scene, geom: VehicleGeometry, cfg: PlanningConfig):
+    """Exact dense check: (every pose on the map and clearance >= margin, min clearance m).
+
+    Poses are densified to ``cfg.dense`` spacing per segment; clearance is exact polygon
+    distance. A trajectory without segments is checked at the start pose.
+    """
+    obstacles = scene.obstacle_arrays()
+    step, dh = cfg.dense.max_step_m, math.radians(cfg.dense.max_dheading_deg)
+    parts = [geometry.densify(s.poses, step, dh) for s in traj.segments] or [
+        np.asarray([scene.start], dtype=float)
+    ]
+    dense = np.concatenate(parts, axis=0)
+    if not np.all(geometry.inside_bounds(dense, geom, scene.bounds)):
+        return False, -1.0
+    if not obstacles:
+        return True, math.inf
+    worst = float(geometry.clearance(dense, geom, obstacles, cutoff=1.0).min())
+    return worst >= cfg.safety_margin_m - 1e-9, worst
+
+
+def plan(scene, cfg: PlanningConfig | None = None, geom: VehicleGeometry | None = None):
+    """Plan one scene with a fresh :class:`HybridAStar` (see its docs)."""
+    return HybridAStar(cfg, geom).plan(scene)
