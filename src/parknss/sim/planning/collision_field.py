@@ -127,7 +127,7 @@ class FieldChecker:
         self.max_dheading = max_dheading
         self.obstacles = [np.asarray(o, dtype=float) for o in obstacles]
         self.field = DistanceField(self.obstacles, self.bounds, resolution, self.need + band)
-        spacing = min(0.15, 1.8 * max(self.need - tolerance, 0.01))
+        spacing = min(0.2, 1.8 * max(self.margin, 0.01))
         self.samples = body_samples(geom, spacing)
         self.verts = np.concatenate(self.obstacles, axis=0) if self.obstacles else np.zeros((0, 2))
         self._centres = np.array([o.mean(axis=0) for o in self.obstacles]).reshape(-1, 2)
@@ -155,32 +155,60 @@ class FieldChecker:
         near = gap <= radius
         return self.verts[near[self._vert_owner]]
 
+    def set_broad_phase(self, dist: np.ndarray, x0: float, y0: float, res: float) -> None:
+        """Use a coarse grid of lower bounds of the obstacle distance (m) at nodes
+        (x0 + i·res, y0 + j·res), shape (ny, nx), to skip poses far from everything."""
+        self._coarse = (np.asarray(dist, dtype=float), float(x0), float(y0), float(res))
+
+    def _lower_bound(self, p: np.ndarray) -> np.ndarray | None:
+        """(P,) lower bound of the footprint clearance from the coarse grid, or None."""
+        if getattr(self, "_coarse", None) is None:
+            return None
+        dist, x0, y0, res = self._coarse
+        cx = p[:, 0] + np.cos(p[:, 2]) * self.centre_offset
+        cy = p[:, 1] + np.sin(p[:, 2]) * self.centre_offset
+        i = np.clip(np.rint((cx - x0) / res).astype(np.intp), 0, dist.shape[1] - 1)
+        j = np.clip(np.rint((cy - y0) / res).astype(np.intp), 0, dist.shape[0] - 1)
+        return dist[j, i] - res / math.sqrt(2.0) - self.reach
+
     def clearance(self, poses: np.ndarray, verts: np.ndarray | None = None) -> np.ndarray:
         """(P,) footprint clearance (m, capped) at poses (P, 3+); -1 where off the map.
 
         ``verts`` restricts the exact vertex test to a subset of obstacle vertices (those
-        that can matter near these poses); default all.
+        that can matter near these poses); default all. Poses that the broad phase
+        (:meth:`set_broad_phase`) proves far from every obstacle get a lower bound.
         """
         p = np.asarray(poses, dtype=float)
         if not len(p):
             return np.zeros(0)
         verts = self.verts if verts is None else verts
         c, s = np.cos(p[:, 2:3]), np.sin(p[:, 2:3])
-        sx, sy = self.samples[None, :, 0], self.samples[None, :, 1]
-        wx = p[:, 0:1] + c * sx - s * sy
-        wy = p[:, 1:2] + s * sx + c * sy
-        d = self.field(wx, wy).min(axis=1)
-        if len(verts):
-            vx = verts[None, :, 0] - p[:, 0:1]
-            vy = verts[None, :, 1] - p[:, 1:2]
-            lx = c * vx + s * vy
-            ly = -s * vx + c * vy
-            dx = np.maximum(np.maximum(self.rear - lx, lx - self.front), 0.0)
-            dy = np.maximum(np.abs(ly) - self.hw, 0.0)
-            d = np.minimum(d, np.sqrt(dx * dx + dy * dy).min(axis=1))
+        corners = self.samples[:4]
+        wx = p[:, 0:1] + c * corners[None, :, 0] - s * corners[None, :, 1]
+        wy = p[:, 1:2] + s * corners[None, :, 0] + c * corners[None, :, 1]
         xmin, ymin, xmax, ymax = self.bounds
-        cx, cy = wx[:, :4], wy[:, :4]  # the corners come first in the samples
-        inside = np.all((cx >= xmin) & (cx <= xmax) & (cy >= ymin) & (cy <= ymax), axis=1)
+        inside = np.all((wx >= xmin) & (wx <= xmax) & (wy >= ymin) & (wy <= ymax), axis=1)
+        lb = self._lower_bound(p)
+        if lb is None:
+            near = np.arange(len(p))
+            d = np.empty(len(p))
+        else:
+            near = np.flatnonzero(lb < self.field.cap)
+            d = np.minimum(lb, self.field.cap)
+        if len(near):
+            q, cq, sq = p[near], c[near], s[near]
+            sx, sy = self.samples[None, :, 0], self.samples[None, :, 1]
+            dn = self.field(q[:, 0:1] + cq * sx - sq * sy, q[:, 1:2] + sq * sx + cq * sy)
+            dn = dn.min(axis=1)
+            if len(verts):
+                vx = verts[None, :, 0] - q[:, 0:1]
+                vy = verts[None, :, 1] - q[:, 1:2]
+                lx = cq * vx + sq * vy
+                ly = -sq * vx + cq * vy
+                dx = np.maximum(np.maximum(self.rear - lx, lx - self.front), 0.0)
+                dy = np.maximum(np.abs(ly) - self.hw, 0.0)
+                dn = np.minimum(dn, np.sqrt(dx * dx + dy * dy).min(axis=1))
+            d[near] = dn
         return np.where(inside, d, -1.0)
 
     def corners_free(self, poses: np.ndarray) -> np.ndarray:

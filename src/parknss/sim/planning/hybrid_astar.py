@@ -75,7 +75,7 @@ class PlanningConfig(StrictModel):
     fine_xy_resolution_m: float = Field(0.05, gt=0.0)
     fine_heading_resolution_deg: float = Field(1.0, gt=0.0)
     fine_below_clearance_m: float = Field(0.3, ge=0.0, description="fine cells below this")
-    n_steer: int = Field(5, ge=2, description="curvatures from right to left lock")
+    n_steer: int = Field(3, ge=2, description="curvatures from right to left lock")
     primitive_length_m: float = Field(0.8, gt=0.0, description="arc length of a successor")
     min_primitive_m: float = Field(0.1, gt=0.0, description="shortest cut-back successor")
     sample_step_m: float = Field(0.1, gt=0.0, description="pose spacing of the search check")
@@ -93,6 +93,9 @@ class PlanningConfig(StrictModel):
     connect_every: int = Field(3, ge=1, description="connect to nearest other-tree nodes every n")
     connect_neighbours: int = Field(2, ge=0, description="nearest other-tree nodes tried")
     connect_max_m: float = Field(15.0, gt=0.0, description="skip longer connections, m")
+    connect_min_free_m: float = Field(
+        0.5, ge=0.0, description="connect only from nodes that can drive this far, m"
+    )
     rs_candidates: int = Field(6, ge=1, description="Reeds-Shepp words checked per connection")
     start_lead_ins_m: tuple[float, ...] = Field(
         (4.0, 8.0, 12.0), description="straight lead-ins from the start tried before RS, m"
@@ -151,18 +154,17 @@ class PlanResult:
 # Holonomic heuristic
 
 
-class HolonomicHeuristic:
-    """Shortest rear-axle distance (m) to a target on a grid, around obstacles.
+class HolonomicGrid:
+    """The rear-axle configuration space on a grid, for the holonomic heuristic.
 
-    A cell is free when its centre is at least ``clearance - res/√2`` from every
-    obstacle and from the map edge: a necessary condition for the rear axle of a
-    collision-free car (the disc of radius W/2 around the rear axle lies inside the
-    footprint), so unreachable cells (``inf``) are truly unreachable. ``dist_obstacle``
-    (exact distance of each cell centre to obstacles and map edge) doubles as a
-    broad-phase collision test.
+    ``dist_obstacle`` holds the exact distance (m) of each cell centre to the obstacles
+    and the map edge. A cell is free when it is at least ``clearance - res/√2``: a
+    necessary condition for the rear axle of a collision-free car (the disc of radius
+    W/2 around the rear axle lies inside the footprint), so a cell unreachable on the
+    grid is unreachable for the car.
     """
 
-    def __init__(self, obstacles, bounds, target_xy, clearance: float, res: float) -> None:
+    def __init__(self, obstacles, bounds, clearance: float, res: float) -> None:
         xmin, ymin, xmax, ymax = bounds
         self.res = res
         self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
@@ -176,20 +178,19 @@ class HolonomicHeuristic:
         for poly in obstacles:
             d = np.minimum(d, point_distance(pts, poly))
         self.dist_obstacle = d.reshape(self.ny, self.nx)
-        free = self.dist_obstacle >= clearance - res / math.sqrt(2.0)
-        ti, tj = self._index(*target_xy)
-        free[tj, ti] = True
-        self.dist = self._dijkstra(free, tj * self.nx + ti)
+        self.free = self.dist_obstacle >= clearance - res / math.sqrt(2.0)
+        self._graph = None
 
-    def _index(self, x: float, y: float) -> tuple[int, int]:
+    def index(self, x: float, y: float) -> tuple[int, int]:
+        """(i, j) of the cell nearest to (x, y), clamped to the grid."""
         i = min(max(round((x - self.x0) / self.res), 0), self.nx - 1)
         j = min(max(round((y - self.y0) / self.res), 0), self.ny - 1)
         return i, j
 
-    def _dijkstra(self, free: np.ndarray, source: int) -> np.ndarray:
-        ny, nx = free.shape
+    def _build_graph(self):
+        ny, nx = self.ny, self.nx
         idx = np.arange(ny * nx).reshape(ny, nx)
-        flat = free.ravel()
+        flat = self.free.ravel()
         rows, cols, wts = [], [], []
         for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
             a = idx[: ny - dj, max(0, -di) : nx - max(0, di)].ravel()
@@ -199,17 +200,36 @@ class HolonomicHeuristic:
             cols.append(b[keep])
             wts.append(np.full(int(keep.sum()), self.res * math.hypot(di, dj)))
         r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(wts)
-        graph = coo_matrix((w, (r, c)), shape=(ny * nx, ny * nx)).tocsr()
-        return dijkstra(graph, directed=False, indices=source).reshape(ny, nx)
+        return coo_matrix((w, (r, c)), shape=(ny * nx, ny * nx)).tocsr()
+
+    def heuristic(self, target_xy) -> HolonomicHeuristic:
+        """Shortest grid distances (m) from every cell to the target's cell."""
+        ti, tj = self.index(*target_xy)
+        if not self.free[tj, ti]:  # the target itself is known to be valid
+            self.free[tj, ti] = True
+            self._graph = None
+        if self._graph is None:
+            self._graph = self._build_graph()
+        dist = dijkstra(self._graph, directed=False, indices=tj * self.nx + ti)
+        return HolonomicHeuristic(self, dist.reshape(self.ny, self.nx))
+
+
+class HolonomicHeuristic:
+    """Shortest rear-axle distance (m) to one target around obstacles; inf if cut off."""
+
+    def __init__(self, grid: HolonomicGrid, dist: np.ndarray) -> None:
+        self.grid = grid
+        self.dist = dist
 
     def __call__(self, x: float, y: float) -> float:
-        i, j = self._index(x, y)
+        i, j = self.grid.index(x, y)
         return float(self.dist[j, i])
 
     def obstacle_distance(self, x: float, y: float) -> float:
         """Lower bound of the distance (m) from (x, y) to obstacles and the map edge."""
-        i, j = self._index(x, y)
-        return float(self.dist_obstacle[j, i]) - self.res / math.sqrt(2.0)
+        g = self.grid
+        i, j = g.index(x, y)
+        return float(g.dist_obstacle[j, i]) - g.res / math.sqrt(2.0)
 
 
 # ---------------------------------------------------------------------------------------
@@ -330,6 +350,7 @@ class HybridAStar:
         result = self._plan(scene, stats, t0)
         result.stats = stats
         stats.time_s = time.perf_counter() - t0
+        stats.search_time_s = max(0.0, stats.time_s - stats.setup_time_s - stats.verify_time_s)
         return result
 
     def _precheck(self, scene, obstacles) -> PlanResult | None:
@@ -366,43 +387,42 @@ class HybridAStar:
             max_step=c.dense.max_step_m,
             max_dheading=math.radians(c.dense.max_dheading_deg),
         )
-        need = 0.5 * self.geom.width + c.safety_margin_m
-        res = c.holonomic_resolution_m
-        holo_goal = HolonomicHeuristic(obstacles, scene.bounds, goal[:2], need, res)
+        self._checker = checker
+        self._scene = scene
+        self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
+        self._lip_max = float(self._lips.max())
+        clr = checker.clearance(np.array([start, goal]))
+        # the direct connection (with lead-ins) first: easy scenes end here
+        direct = _Tree(_Node(start, 0.0, -1, 0.0, 0, 0.0, 0.0), goal, None, False)
         stats.setup_time_s = time.perf_counter() - t0
+        done = self._connect(direct, 0, None, [0], stats)
+        if done is not None:
+            return done
+        t1 = time.perf_counter()
+        need = 0.5 * self.geom.width + c.safety_margin_m
+        grid = HolonomicGrid(obstacles, scene.bounds, need, c.holonomic_resolution_m)
+        checker.set_broad_phase(grid.dist_obstacle, grid.x0, grid.y0, grid.res)
+        holo_goal = grid.heuristic(goal[:2])
         if not math.isfinite(holo_goal(*start[:2])):
             return PlanResult(
                 False,
                 "goal unreachable",
                 detail="no corridor wide enough for the car joins start and goal",
             )
-        clr = checker.clearance(np.array([start, goal]))
         trees = []
         if c.search != "from_goal":
             trees.append(_Tree(self._root(start, clr[0], holo_goal), goal, holo_goal, False))
         if c.search != "from_start":
-            holo_start = HolonomicHeuristic(obstacles, scene.bounds, start[:2], need, res)
+            holo_start = grid.heuristic(start[:2])
             trees.append(_Tree(self._root(goal, clr[1], holo_start), start, holo_start, True))
-        stats.setup_time_s = time.perf_counter() - t0
-        self._checker = checker
-        self._scene = scene
-        self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
-        self._lip_max = float(self._lips.max())
-        t_search = time.perf_counter()
-        try:
-            return self._search(trees, stats, t0 + c.time_budget_s)
-        finally:
-            stats.search_time_s = time.perf_counter() - t_search - stats.verify_time_s
+        stats.setup_time_s += time.perf_counter() - t1
+        return self._search(trees, stats, t0 + c.time_budget_s)
 
     def _root(self, pose, clr: float, holo: HolonomicHeuristic) -> _Node:
         return _Node(pose, 0.0, -1, 0.0, 0, 0.0, holo(*pose[:2]), self._key(pose, clr), clr)
 
     def _search(self, trees: list[_Tree], stats: PlanStats, deadline: float) -> PlanResult:
         c = self.cfg
-        # the direct Reeds-Shepp connection first
-        done = self._connect(trees[0], 0, trees[-1] if len(trees) > 1 else None, [0], stats)
-        if done is not None:
-            return done
         while any(t.heap for t in trees):
             for i, tree in enumerate(trees):
                 if time.perf_counter() > deadline:
@@ -451,18 +471,6 @@ class HybridAStar:
         node = tree.nodes[nid]
         tree.expansions += 1
         stats.expansions += 1
-        # connections: the other root, and nearest nodes of the other tree
-        targets = []
-        if node.h <= c.analytic_always_within_m or (tree.expansions - 1) % c.analytic_every == 0:
-            targets.append(0)
-        if other is not None and c.connect_neighbours and tree.expansions % c.connect_every == 0:
-            for m in other.nearest(node.pose, c.connect_neighbours + 1, self.radius):
-                if m not in targets:
-                    targets.append(m)
-        if targets:
-            done = self._connect(tree, nid, other, targets, stats)
-            if done is not None:
-                return done
         # successors
         x0, y0, th0 = node.pose
         cs, sn = math.cos(th0), math.sin(th0)
@@ -479,6 +487,18 @@ class HybridAStar:
         else:
             verts = ch.vertices_near(cx, cy, ch.reach + sweep + ch.need)
             reach = ch.reach_along(list(world), self._lips, verts)
+        # connections: the other root, and nearest nodes of the other tree
+        targets = []
+        if node.h <= c.analytic_always_within_m or (tree.expansions - 1) % c.analytic_every == 0:
+            targets.append(0)
+        if other is not None and c.connect_neighbours and tree.expansions % c.connect_every == 0:
+            for m in other.nearest(node.pose, c.connect_neighbours + 1, self.radius):
+                if m not in targets:
+                    targets.append(m)
+        if targets and float(reach.max()) * c.sample_step_m >= c.connect_min_free_m:
+            done = self._connect(tree, nid, other, targets, stats)
+            if done is not None:
+                return done
         w = c.heuristic_weight
         cands = []
         for k, r in enumerate(reach):
@@ -540,20 +560,20 @@ class HybridAStar:
         if not cands:
             return None
         cands.sort(key=lambda t: t[0])
-        samples = [a[:, :3] for a in rs.sample_paths([p for *_, p in cands], c.sample_step_m)]
         stats.rs_checked += len(cands)
-        # cheap reject: corners or obstacle vertices within the margin at every 4th pose
         ch = self._checker
-        coarse = [s_[::4] for s_ in samples]
+        # cheap reject on a coarse sampling: corners or obstacle vertices within the margin
+        coarse = [a[:, :3] for a in rs.sample_paths([p for *_, p in cands], 4 * c.sample_step_m)]
         flat_ok = ch.corners_free(np.concatenate(coarse))
-        splits = np.cumsum([len(s_) for s_ in coarse])[:-1]
+        splits = np.cumsum([len(a) for a in coarse])[:-1]
         alive = [i for i, ok in enumerate(np.split(flat_ok, splits)) if ok.all()]
         if not alive:
             return None
+        samples = [a[:, :3] for a in rs.sample_paths([cands[i][2] for i in alive], c.sample_step_m)]
         lip = ch.lipschitz(self.kmax)
-        reach = ch.reach_along([samples[i] for i in alive], np.full(len(alive), lip))
-        for i, r in zip(alive, reach, strict=True):
-            if r < len(samples[i]) - 1 - 1e-9:
+        reach = ch.reach_along(samples, np.full(len(alive), lip))
+        for i, smp, r in zip(alive, samples, reach, strict=True):
+            if r < len(smp) - 1 - 1e-9:
                 continue
             _, m, path = cands[i]
             tv = time.perf_counter()

@@ -1,0 +1,97 @@
+"""Draw a parking scene with its planned path: obstacles, start and goal, the coarse
+(Hybrid A*) and refined paths, footprints at intervals and the cusps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from parknss.report.style import save
+from parknss.sim.geometry import footprint
+from parknss.sim.trajectory import Trajectory
+from parknss.vehicle import VehicleGeometry
+
+OBSTACLE_COLOURS = {"car": "#9aa5b1", "curb": "#6b4f3a", "barrier": "#c0392b"}
+
+
+def _outline(ax, poly: np.ndarray, **kw) -> None:
+    closed = np.vstack([poly, poly[:1]])
+    ax.plot(closed[:, 0], closed[:, 1], **kw)
+
+
+def _draw_path(ax, traj: Trajectory, colour: str, label: str, lw: float) -> None:
+    first = True
+    for seg in traj.segments:
+        style = "-" if seg.direction > 0 else "--"
+        ax.plot(
+            seg.poses[:, 0],
+            seg.poses[:, 1],
+            style,
+            color=colour,
+            lw=lw,
+            label=label if first else None,
+        )
+        first = False
+
+
+def _footprints_along(traj: Trajectory, every: float) -> list[np.ndarray]:
+    """Poses spaced ``every`` m along a trajectory (arc length), plus each segment end."""
+    out = []
+    for seg in traj.segments:
+        s = seg.arc_length
+        targets = np.arange(0.0, s[-1], every)
+        idx = np.unique(np.searchsorted(s, targets).clip(0, len(s) - 1))
+        out.extend(seg.poses[i] for i in idx)
+        out.append(seg.poses[-1])
+    return out
+
+
+def draw_plan(
+    scene,
+    path: str | Path,
+    coarse: Trajectory | None = None,
+    refined: Trajectory | None = None,
+    geom: VehicleGeometry | None = None,
+    title: str | None = None,
+    footprint_every_m: float = 1.0,
+) -> Path:
+    """Draw ``scene`` with the coarse and refined paths to a PNG at ``path``.
+
+    Forward driving is drawn solid, reverse dashed; footprints every
+    ``footprint_every_m`` m (of the refined path if given, else the coarse one); cusps
+    are marked with x. Returns the PNG path.
+    """
+    geom = geom or VehicleGeometry()
+    xmin, ymin, xmax, ymax = scene.bounds
+    width = 12.0
+    height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
+    fig, ax = plt.subplots(figsize=(width, height + 1.0))
+    ax.add_patch(
+        plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8)
+    )
+    for ob in scene.obstacles:
+        colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
+        ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
+    main = refined if refined is not None and refined.segments else coarse
+    if main is not None and main.segments:
+        for pose in _footprints_along(main, footprint_every_m):
+            _outline(ax, footprint(pose, geom), color="#2e86c1", lw=0.4, alpha=0.5)
+    if coarse is not None and coarse.segments:
+        _draw_path(ax, coarse, "#27ae60", "coarse (Hybrid A*)", 1.6)
+    if refined is not None and refined.segments:
+        _draw_path(ax, refined, "#8e44ad", f"refined ({refined.source})", 1.2)
+    if main is not None:
+        for seg in main.segments[:-1]:
+            ax.plot(*seg.poses[-1, :2], "kx", ms=8, mew=2)
+    _outline(ax, footprint(scene.start, geom), color="#2471a3", lw=1.8, label="start")
+    _outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=1.8, ls=":", label="goal")
+    ax.set_aspect("equal")
+    ax.set_xlim(xmin - 0.5, xmax + 0.5)
+    ax.set_ylim(ymin - 0.5, ymax + 0.5)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title or scene.meta.name)
+    ax.legend(loc="upper right", fontsize=8)
+    return save(fig, path)
