@@ -68,9 +68,7 @@ def draw_plan(
     width = 12.0
     height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
     fig, ax = plt.subplots(figsize=(width, height + 1.0))
-    ax.add_patch(
-        plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8)
-    )
+    ax.add_patch(plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8))
     for ob in scene.obstacles:
         colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
         ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
