@@ -200,16 +200,37 @@ class FieldChecker:
             sx, sy = self.samples[None, :, 0], self.samples[None, :, 1]
             dn = self.field(q[:, 0:1] + cq * sx - sq * sy, q[:, 1:2] + sq * sx + cq * sy)
             dn = dn.min(axis=1)
-            if len(verts):
-                vx = verts[None, :, 0] - q[:, 0:1]
-                vy = verts[None, :, 1] - q[:, 1:2]
-                lx = cq * vx + sq * vy
-                ly = -sq * vx + cq * vy
-                dx = np.maximum(np.maximum(self.rear - lx, lx - self.front), 0.0)
-                dy = np.maximum(np.abs(ly) - self.hw, 0.0)
-                dn = np.minimum(dn, np.sqrt(dx * dx + dy * dy).min(axis=1))
+            if verts is self.verts and len(q) * len(verts) > 4096:
+                dn = np.minimum(dn, self._vertex_distance_by_obstacle(q, cq, sq))
+            elif len(verts):
+                dn = np.minimum(dn, self._vertex_distance(q, cq, sq, verts))
             d[near] = dn
         return np.where(inside, d, -1.0)
+
+    def _vertex_distance(self, q, cq, sq, verts) -> np.ndarray:
+        """(P,) exact distance from the footprint rectangles to the nearest vertex."""
+        vx = verts[None, :, 0] - q[:, 0:1]
+        vy = verts[None, :, 1] - q[:, 1:2]
+        lx = cq * vx + sq * vy
+        ly = -sq * vx + cq * vy
+        dx = np.maximum(np.maximum(self.rear - lx, lx - self.front), 0.0)
+        dy = np.maximum(np.abs(ly) - self.hw, 0.0)
+        return np.sqrt(dx * dx + dy * dy).min(axis=1)
+
+    def _vertex_distance_by_obstacle(self, q, cq, sq) -> np.ndarray:
+        """As :meth:`_vertex_distance` over all obstacles, skipping far pose/obstacle pairs
+        (their vertices are farther than the field cap, so they cannot set the minimum)."""
+        out = np.full(len(q), np.inf)
+        cx = q[:, 0] + cq[:, 0] * self.centre_offset
+        cy = q[:, 1] + sq[:, 0] * self.centre_offset
+        limit = self.reach + self.field.cap
+        for k, obs in enumerate(self.obstacles):
+            gap = np.hypot(cx - self._centres[k, 0], cy - self._centres[k, 1]) - self._radii[k]
+            sel = np.flatnonzero(gap <= limit)
+            if len(sel):
+                dk = self._vertex_distance(q[sel], cq[sel], sq[sel], obs)
+                out[sel] = np.minimum(out[sel], dk)
+        return out
 
     def corners_free(self, poses: np.ndarray) -> np.ndarray:
         """(P,) cheap necessary test: corners and obstacle vertices clear the margin.
@@ -265,37 +286,25 @@ class FieldChecker:
         ok_int = ok_pose[i0] & ok_pose[i0 + 1]
         mean = 0.5 * (clr[i0] + clr[i0 + 1])
         certain = ok_int & (mean - 0.5 * lips[owner] * step >= self.need)
-        unsure = np.flatnonzero(ok_int & ~certain)
-        if len(unsure):
-            dense, pair, _, _ = densify_pairs(
-                a[unsure], b[unsure], self.max_step, self.max_dheading
-            )
-            good = self.clearance(dense, verts) >= self.need
-            bad_count = np.bincount(pair, weights=~good, minlength=len(unsure))
-            certain[unsure] = bad_count == 0
-        # first blocked interval per path
+        # per path, intervals up to the first one with a blocked end pose
         int_first = first - np.arange(len(paths))  # interval offset of each path
+        local = np.arange(len(i0)) - int_first[owner]
+        first_hard = np.full(len(paths), np.iinfo(np.int64).max)
+        hard = np.flatnonzero(~ok_int)
+        np.minimum.at(first_hard, owner[hard], local[hard])
+        limit = first_hard[owner]
+        check = np.flatnonzero(((ok_int & ~certain) & (local < limit)) | (local == limit))
         reach = (lens - 1).astype(float)
-        blocked = np.flatnonzero(~certain)
-        if len(blocked):
-            bowner = owner[blocked]
-            firsts = np.full(len(paths), -1)
-            # the minimum blocked interval per owner
-            order = np.argsort(blocked, kind="stable")
-            bo, bi = bowner[order], blocked[order]
-            uniq, idx = np.unique(bo, return_index=True)
-            firsts[uniq] = bi[idx]
-            trunc = np.flatnonzero(firsts >= 0)
-            loc = firsts[trunc]
-            reach[trunc] = loc - int_first[trunc]
-            dense, pair, j, n = densify_pairs(a[loc], b[loc], self.max_step, self.max_dheading)
+        if len(check):
+            # one dense pass over every uncertain interval and each path's first blocked one
+            dense, pair, j, n = densify_pairs(a[check], b[check], self.max_step, self.max_dheading)
             bad = self.clearance(dense, verts) < self.need
-            # first bad sub-step per pair (n+1 if none)
-            jb = np.where(bad, j, np.iinfo(np.int64).max)
-            first_bad = np.full(len(loc), np.iinfo(np.int64).max)
-            np.minimum.at(first_bad, pair, jb)
-            first_bad = np.minimum(first_bad, n)  # a blocked interval stops by its end
-            reach[trunc] += (first_bad - 1) / n
+            big = np.iinfo(np.int64).max
+            first_bad = np.full(len(check), big)
+            np.minimum.at(first_bad, pair[bad], j[bad])
+            blocked = first_bad <= n
+            value = local[check][blocked] + (first_bad[blocked] - 1) / n[blocked]
+            np.minimum.at(reach, owner[check][blocked], value)
         if end_clearance:
             return reach, clr[first + lens - 1]
         return reach

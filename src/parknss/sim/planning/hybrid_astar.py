@@ -76,14 +76,14 @@ class PlanningConfig(StrictModel):
     fine_heading_resolution_deg: float = Field(1.0, gt=0.0)
     fine_below_clearance_m: float = Field(0.3, ge=0.0, description="fine cells below this")
     n_steer: int = Field(3, ge=2, description="curvatures from right to left lock")
-    primitive_length_m: float = Field(0.8, gt=0.0, description="arc length of a successor")
+    primitive_length_m: float = Field(1.2, gt=0.0, description="arc length of a successor")
     min_primitive_m: float = Field(0.1, gt=0.0, description="shortest cut-back successor")
     sample_step_m: float = Field(0.1, gt=0.0, description="pose spacing of the search check")
     reverse_cost: float = Field(1.2, ge=1.0, description="cost factor per metre in reverse")
     gear_switch_cost: float = Field(1.0, ge=0.0, description="cost per cusp, m")
     steer_cost: float = Field(0.1, ge=0.0, description="cost per metre at full lock")
     steer_change_cost: float = Field(0.2, ge=0.0, description="cost per lock-to-centre change")
-    heuristic_weight: float = Field(1.5, ge=1.0)
+    heuristic_weight: float = Field(2.0, ge=1.0)
     holonomic_resolution_m: float = Field(0.25, gt=0.0)
     field_resolution_m: float = Field(0.05, gt=0.0, description="distance-field grid, m")
     field_tolerance_m: float = Field(0.01, ge=0.0, description="interpolation allowance, m")
@@ -455,7 +455,10 @@ class HybridAStar:
                 continue
             if not node.rs_done:
                 node.rs_done = True
-                h_rs = rs.shortest_length(node.pose, tree.target, self.radius)
+                # a CSC path no longer than the holonomic bound settles it cheaply
+                h_rs = rs.csc_length(node.pose, tree.target, self.radius)
+                if h_rs > node.h:
+                    h_rs = rs.shortest_length(node.pose, tree.target, self.radius)
                 if h_rs > node.h + 1e-9:
                     node.h = h_rs
                     nf = node.g + w * node.h
