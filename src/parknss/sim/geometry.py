@@ -138,11 +138,18 @@ def point_distance(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """(N,) distance in m from points (N, 2) to a convex CCW polygon (M, 2); 0 inside."""
     p = np.asarray(points, dtype=float)
     b = np.asarray(poly, dtype=float)
-    b_next = np.roll(b, -1, axis=0)
-    n = _normals(b)  # outward for CCW
-    inside = np.all(np.einsum("md,nmd->nm", n, p[:, None, :] - b[None]) <= 0.0, axis=1)
-    d = _point_segment_dist(p[:, None, :], b[None], b_next[None]).min(axis=1)
-    return np.where(inside, 0.0, d)
+    px, py = p[:, 0], p[:, 1]
+    best = np.full(len(p), np.inf)
+    inside = np.ones(len(p), dtype=bool)
+    for k in range(len(b)):
+        ax, ay = b[k]
+        ex, ey = b[(k + 1) % len(b)] - b[k]
+        rx, ry = px - ax, py - ay
+        inside &= ex * ry - ey * rx >= 0.0  # left of every CCW edge
+        t = np.clip((rx * ex + ry * ey) / max(ex * ex + ey * ey, 1e-300), 0.0, 1.0)
+        dx, dy = rx - t * ex, ry - t * ey
+        np.minimum(best, dx * dx + dy * dy, out=best)
+    return np.where(inside, 0.0, np.sqrt(best))
 
 
 def distance(polys: np.ndarray, poly: np.ndarray) -> np.ndarray:

@@ -164,20 +164,29 @@ class HolonomicGrid:
     grid is unreachable for the car.
     """
 
-    def __init__(self, obstacles, bounds, clearance: float, res: float) -> None:
+    def __init__(self, obstacles, bounds, clearance: float, res: float, cap: float) -> None:
         xmin, ymin, xmax, ymax = bounds
         self.res = res
         self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
         self.nx = max(1, math.floor((xmax - xmin) / res))
         self.ny = max(1, math.floor((ymax - ymin) / res))
-        gx, gy = np.meshgrid(self.x0 + res * np.arange(self.nx), self.y0 + res * np.arange(self.ny))
-        pts = np.column_stack([gx.ravel(), gy.ravel()])
-        d = np.minimum.reduce(
-            [pts[:, 0] - xmin, xmax - pts[:, 0], pts[:, 1] - ymin, ymax - pts[:, 1]]
+        xs = self.x0 + res * np.arange(self.nx)
+        ys = self.y0 + res * np.arange(self.ny)
+        d = np.minimum(
+            np.minimum(xs - xmin, xmax - xs)[None, :], np.minimum(ys - ymin, ymax - ys)[:, None]
         )
-        for poly in obstacles:
-            d = np.minimum(d, point_distance(pts, poly))
-        self.dist_obstacle = d.reshape(self.ny, self.nx)
+        d = np.minimum(d, cap)  # beyond ``cap`` m only a lower bound is needed
+        for poly in obstacles:  # exact distances within ``cap`` of each polygon
+            lo, hi = poly.min(axis=0) - cap, poly.max(axis=0) + cap
+            i0, i1 = np.searchsorted(xs, lo[0]), np.searchsorted(xs, hi[0], side="right")
+            j0, j1 = np.searchsorted(ys, lo[1]), np.searchsorted(ys, hi[1], side="right")
+            if i1 <= i0 or j1 <= j0:
+                continue
+            gx, gy = np.meshgrid(xs[i0:i1], ys[j0:j1])
+            dp = point_distance(np.column_stack([gx.ravel(), gy.ravel()]), poly)
+            block = d[j0:j1, i0:i1]
+            np.minimum(block, dp.reshape(block.shape), out=block)
+        self.dist_obstacle = d
         self.free = self.dist_obstacle >= clearance - res / math.sqrt(2.0)
         self._graph = None
 
@@ -400,7 +409,9 @@ class HybridAStar:
             return done
         t1 = time.perf_counter()
         need = 0.5 * self.geom.width + c.safety_margin_m
-        grid = HolonomicGrid(obstacles, scene.bounds, need, c.holonomic_resolution_m)
+        sweep = self._lip_max * c.primitive_length_m
+        cap = max(need, checker.reach + sweep + checker.need) + 1.0
+        grid = HolonomicGrid(obstacles, scene.bounds, need, c.holonomic_resolution_m, cap)
         checker.set_broad_phase(grid.dist_obstacle, grid.x0, grid.y0, grid.res)
         holo_goal = grid.heuristic(goal[:2])
         if not math.isfinite(holo_goal(*start[:2])):
