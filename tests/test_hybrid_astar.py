@@ -37,7 +37,9 @@ def _check_plan(scene, result):
     assert np.allclose(first[:2], scene.start[:2], atol=1e-9)
     assert abs(_wrap(first[2] - scene.start[2])) < 1e-9
     assert np.allclose(last[:2], scene.goal[:2], atol=1e-6)
-    assert abs(_wrap(last[2] - scene.goal[2])) < 1e-6
+    assert abs(_wrap(last[2] - scene.goal[2])) < 1e-6  # the goal up to whole turns
+    headings = traj.poses()[:, 2]
+    assert np.abs(np.diff(headings)).max() < 0.1  # one continuous (unwrapped) heading
     kmax = 1.0 / min_turning_radius(G)
     for a, b in itertools.pairwise(segs):
         assert a.direction == -b.direction  # segments split exactly at cusps

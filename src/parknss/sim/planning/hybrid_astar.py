@@ -548,6 +548,13 @@ class HybridAStar:
             end = pieces[-1][0]
             end[-1, :2] = path.goal[:2]
         pieces += self._chain(bwd, bid)
+        # one continuous heading along the whole path (the trees unwrap independently)
+        prev = None
+        for poses, _, _ in pieces:
+            poses[:, 2] = np.unwrap(poses[:, 2])
+            if prev is not None:
+                poses[:, 2] += 2 * math.pi * round((prev - poses[0, 2]) / (2 * math.pi))
+            prev = poses[-1, 2]
         segments: list[Segment] = []
         cur_p: list[np.ndarray] = []
         cur_k: list[np.ndarray] = []
