@@ -20,7 +20,7 @@ from parknss.sim.scenarios import Obstacle, Scene, grid_scene
 from parknss.vehicle import VehicleGeometry, min_turning_radius
 
 G = VehicleGeometry()
-CFG = PlanningConfig()
+CFG = PlanningConfig(time_budget_s=30.0)  # correctness here; speed is benchmarks/bench_plan.py
 PLANNER = HybridAStar(CFG, G)
 
 
@@ -78,7 +78,7 @@ def test_grid_cells_plan_cleanly(cell):
 @pytest.mark.parametrize("search", ["from_start", "from_goal"])
 def test_single_tree_modes(search):
     scene = grid_scene(34)
-    planner = HybridAStar(PlanningConfig(search=search, start_lead_ins_m=()), G)
+    planner = HybridAStar(PlanningConfig(search=search, start_lead_ins_m=(), time_budget_s=30.0), G)
     _check_plan(scene, planner.plan(scene))
 
 
