@@ -131,9 +131,10 @@ def _read_csv(path: Path, opts: CsvOptions) -> Raw:
         raise DataError(f"{path}: no data rows below the header")
     for (n, _), row in zip(numbered[1:], rows[1:], strict=True):
         if len(row) != len(header):
+            last = n == numbered[-1][0]
             raise DataError(
-                f"{path}: line {n}: {len(row)} fields, the header has {len(header)} "
-                "(truncated or malformed file)"
+                f"{path}: line {n}{' (the last)' if last else ''}: {len(row)} fields, the "
+                f"header has {len(header)} ({'truncated file?' if last else 'malformed row'})"
             )
     linenos = [n for n, _ in numbered[1:]]
     cols = list(zip(*rows[1:], strict=True))

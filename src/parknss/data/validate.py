@@ -167,8 +167,8 @@ def _check_time(t: np.ndarray, source: str, cfg: ValidationConfig) -> None:
         k = int(back[0])
         raise TrialDataError(
             source,
-            f"time goes backwards {len(back)} times (first from t={t[k]:.2f} s to "
-            f"t={t[k + 1]:.2f} s at row {k + 2})",
+            f"time goes backwards at {len(back)} steps (first from t={t[k]:.2f} s to "
+            f"t={t[k + 1]:.2f} s)",
             "t",
         )
     tol = cfg.dt_tolerance_s
@@ -181,22 +181,16 @@ def _check_time(t: np.ndarray, source: str, cfg: ValidationConfig) -> None:
             "t",
         )
     gaps = np.flatnonzero(dt > DT + tol)
-    if len(gaps):
-        k = int(gaps[0])
-        raise TrialDataError(
-            source,
-            f"{len(gaps)} gaps in time (first of {_fmt(dt[k])} s after t={t[k]:.2f} s; "
-            f"expected dt {DT} s ± {tol} s)",
-            "t",
-        )
     short = np.flatnonzero(dt < DT - tol)
-    if len(short):
-        k = int(short[0])
+    if len(gaps) or len(short):
+        k = int(min(gaps[:1].tolist() + short[:1].tolist()))
+        what = (
+            f"{len(gaps)} gaps in time (first of {_fmt(dt[k])} s"
+            if dt[k] > DT
+            else f"irregular sampling: {len(short)} steps too short (first of {_fmt(dt[k])} s"
+        )
         raise TrialDataError(
-            source,
-            f"irregular sampling: {len(short)} steps shorter than {DT} s - {tol} s "
-            f"(first of {_fmt(dt[k])} s after t={t[k]:.2f} s)",
-            "t",
+            source, f"{what} after t={t[k]:.2f} s; expected dt {DT} s ± {tol} s)", "t"
         )
 
 
