@@ -1,0 +1,489 @@
+"""ISO/TS 18571:2014 objective rating of a predicted against a measured time history.
+
+Both signals lie on one time grid (spacing ``dt`` s, same length N, same unit). The
+measured signal is the standard's reference curve T, the prediction its comparison
+curve C. Four sub-ratings in [0, 1] are combined into the overall rating R:
+
+* corridor Z: on the full, unshifted curves. With t_norm = max|T|, the inner and outer
+  corridor half-widths are a0·t_norm and b0·t_norm; a sample with |C_i - T_i| within the
+  inner corridor scores 1, outside the outer corridor 0, in between
+  ((b0·t_norm - |C_i - T_i|) / ((b0 - a0)·t_norm))^kz; Z is the mean over samples.
+* phase EP: the Pearson correlation of the two curves is evaluated at every shift of
+  up to floor(εP·N) samples in both directions, the shift applied by truncating both
+  curves to their overlap. The shift n with the largest correlation wins; ties go to
+  the smaller |n| and, at equal |n|, to the prediction lagging (the standard's rho_L
+  before rho_R). Correlations within 1e-12 of the best count as ties, so that
+  rounding noise cannot override the standard's minimum-shift rule. EP = 1 for n = 0,
+  0 for |n| >= εP·N, else ((εP·N - |n|)/(εP·N))^kp.
+* magnitude EM (EEARTH): the phase-shifted, truncated curves (length L) are aligned by
+  dynamic time warping (squared-difference local cost, steps (1,0), (0,1), (1,1) of
+  weight 1, Sakoe-Chiba band |i - j| < ceil(band·L)); along the warping path the
+  relative error e = Σ|C_w - T_w| / Σ|T_w| gives EM = ((εM - e)/εM)^km, 0 for e > εM.
+* slope ES: central-difference derivatives of the truncated curves (one-sided at the
+  ends), each smoothed by a centred 9-point moving average whose window shrinks
+  symmetrically to 1, 3, 5, 7 points at the ends; e = Σ|C' - T'| / Σ|T'| gives
+  ES = ((εS - e)/εS)^ks, 0 for e >= εS.
+* R = wZ·Z + wP·EP + wM·EM + wS·ES, graded Excellent (R > 0.94), Good (> 0.80),
+  Fair (> 0.58), else Poor.
+
+Degenerate input is defined, never NaN:
+
+* non-finite samples (NaN, ±inf) or a non-positive dt: DataError.
+* length mismatch or non-1-D input: DataError (resample onto one grid first; no
+  implicit interpolation or cropping).
+* too short: N must leave at least ``slope_window`` (9) samples after the largest
+  allowed shift floor(εP·N) (N >= 11 with the defaults), else DataError.
+* zero variance: the Pearson correlation at a shift where either truncated curve is
+  constant is 0 (no linear association is measurable). Hence a constant or all-zero
+  measurement, or an identically zero prediction, gives shift 0 and EP = 1 (no time
+  shift is identified); the other sub-ratings carry the disagreement.
+* all-zero measurement: t_norm = 0 collapses both corridors to zero width; a sample
+  scores 1 where C_i = T_i exactly and 0 elsewhere.
+* zero denominators in EM and ES (an all-zero truncated measurement, or a constant one
+  for ES): the relative error is 0 when the numerator is 0 too, else infinite, so the
+  sub-rating is 1 for an exact match and 0 otherwise.
+
+Implementation: the correlation at every shift comes from prefix sums and one FFT
+cross-correlation; shifts within 1e-7 of the best are re-evaluated exactly (two-pass
+centred Pearson) before the tie rule is applied. The warping runs over anti-diagonals
+of the band, carrying the cost and the path sums of the standard's back-tracked path
+(ties to (i-1, j), then (i, j-1), then (i-1, j-1)) along with it, so memory is linear
+in N and no N x N matrix is formed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from pydantic import Field, model_validator
+from scipy import signal as sps
+
+from parknss.config import StrictModel
+from parknss.errors import ConfigError, DataError
+
+GRADES: tuple[str, ...] = ("Excellent", "Good", "Fair", "Poor")
+REFINE_TOL = 1.0e-7  # shifts this close to the best correlation are re-evaluated exactly
+TIE_TOL = 1.0e-12  # exact correlations this close to the best are ties (rounding noise)
+
+
+class ISORatingConfig(StrictModel):
+    """ISO/TS 18571 parameters; the defaults are the standard's."""
+
+    a0: float = Field(0.05, gt=0, description="inner corridor half-width / max|T|")
+    b0: float = Field(0.5, gt=0, description="outer corridor half-width / max|T|")
+    corridor_exponent: float = Field(2.0, gt=0, description="kz")
+    max_shift_fraction: float = Field(0.2, gt=0, lt=1, description="εP, of N")
+    phase_exponent: float = Field(1.0, gt=0, description="kp")
+    dtw_band_fraction: float = Field(0.1, gt=0, le=1, description="DTW band, of L")
+    magnitude_limit: float = Field(0.5, gt=0, description="εM")
+    magnitude_exponent: float = Field(1.0, gt=0, description="km")
+    slope_window: int = Field(9, ge=1, description="moving-average points (odd)")
+    slope_limit: float = Field(2.0, gt=0, description="εS")
+    slope_exponent: float = Field(1.0, gt=0, description="ks")
+    weight_corridor: float = Field(0.4, ge=0)
+    weight_phase: float = Field(0.2, ge=0)
+    weight_magnitude: float = Field(0.2, ge=0)
+    weight_slope: float = Field(0.2, ge=0)
+    grade_excellent: float = Field(0.94, description="R above this: Excellent")
+    grade_good: float = Field(0.80, description="R above this: Good")
+    grade_fair: float = Field(0.58, description="R above this: Fair, else Poor")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ISORatingConfig:
+        if not self.a0 < self.b0:
+            raise ValueError("a0 must be smaller than b0")
+        if self.slope_window % 2 != 1:
+            raise ValueError("slope_window must be odd")
+        total = self.weight_corridor + self.weight_phase + self.weight_magnitude
+        if abs(total + self.weight_slope - 1.0) > 1e-9:
+            raise ValueError("the four weights must sum to 1")
+        if not self.grade_excellent > self.grade_good > self.grade_fair:
+            raise ValueError("grade thresholds must decrease: excellent > good > fair")
+        return self
+
+
+@dataclass(frozen=True)
+class Rating:
+    """One ISO/TS 18571 rating. Sub-ratings and overall in [0, 1].
+
+    ``shift_samples`` is the phase shift found, in samples: positive when the prediction
+    lags the measurement (pred[i + n] matches meas[i]), negative when it leads.
+    """
+
+    corridor: float
+    phase: float
+    magnitude: float
+    slope: float
+    overall: float
+    grade: str
+    shift_samples: int
+
+    def as_dict(self) -> dict:
+        """Plain JSON-ready dict of the fields."""
+        return asdict(self)
+
+
+def grade_of(overall: float, config: ISORatingConfig | None = None) -> str:
+    """The ISO/TS 18571 grade of an overall rating (strict '>' at each threshold)."""
+    cfg = config or ISORatingConfig()
+    if overall > cfg.grade_excellent:
+        return "Excellent"
+    if overall > cfg.grade_good:
+        return "Good"
+    if overall > cfg.grade_fair:
+        return "Fair"
+    return "Poor"
+
+
+def min_samples(config: ISORatingConfig | None = None) -> int:
+    """Smallest N that leaves ``slope_window`` samples after the largest allowed shift."""
+    cfg = config or ISORatingConfig()
+    n = cfg.slope_window
+    while n - math.floor(n * cfg.max_shift_fraction) < cfg.slope_window:
+        n += 1
+    return n
+
+
+def _check_pair(measured, predicted, dt: float, cfg: ISORatingConfig, label: str):
+    """Validate and return the two curves as float64 1-D arrays."""
+    try:
+        ok = math.isfinite(float(dt)) and float(dt) > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise DataError(f"{label}: dt must be a positive finite number of seconds, got {dt!r}")
+    out = []
+    for name, arr in (("measured", measured), ("predicted", predicted)):
+        a = np.asarray(arr, dtype=np.float64)
+        if a.ndim != 1:
+            raise DataError(f"{label}: {name} must be 1-D, got shape {a.shape}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            raise DataError(
+                f"{label}: {name} has {int(bad.sum())} non-finite samples (first at index {first})"
+            )
+        out.append(a)
+    m, p = out
+    if m.size != p.size:
+        raise DataError(
+            f"{label}: measured has {m.size} samples, predicted {p.size}; "
+            "rate both on one time grid"
+        )
+    need = min_samples(cfg)
+    if m.size < need:
+        raise DataError(
+            f"{label}: {m.size} samples; the rating needs at least {need} "
+            f"({cfg.slope_window} after the largest allowed phase shift)"
+        )
+    return m, p
+
+
+def corridor_rating(measured: np.ndarray, predicted: np.ndarray, config=None) -> float:
+    """Corridor sub-rating Z of two equal-length curves (no shift applied)."""
+    cfg = config or ISORatingConfig()
+    t_norm = float(np.max(np.abs(measured)))
+    inner, outer = cfg.a0 * t_norm, cfg.b0 * t_norm
+    dev = np.abs(predicted - measured)
+    score = np.zeros_like(dev)
+    score[dev <= inner] = 1.0
+    mid = (dev > inner) & (dev <= outer)
+    score[mid] = ((outer - dev[mid]) / (outer - inner)) ** cfg.corridor_exponent
+    return float(score.mean())
+
+
+def _run_lengths(a: np.ndarray) -> tuple[int, int]:
+    """Lengths of the leading and trailing runs of samples equal to the end samples."""
+    lead = np.flatnonzero(a != a[0])
+    trail = np.flatnonzero(a != a[-1])
+    n = a.size
+    return (int(lead[0]) if lead.size else n), (n - 1 - int(trail[-1]) if trail.size else n)
+
+
+def _pearson(a: np.ndarray, b: np.ndarray) -> float:
+    """Two-pass centred Pearson correlation; 0 where either side has zero variance."""
+    da, db = a - a.mean(), b - b.mean()
+    saa, sbb = float(da @ da), float(db @ db)
+    if saa == 0.0 or sbb == 0.0:
+        return 0.0
+    return float(np.clip((da @ db) / math.sqrt(saa * sbb), -1.0, 1.0))
+
+
+def _windows(m: np.ndarray, p: np.ndarray, shift: int) -> tuple[np.ndarray, np.ndarray]:
+    """The overlap of the two curves at a shift (positive: the prediction lags)."""
+    n = m.size
+    if shift >= 0:
+        return m[: n - shift], p[shift:]
+    return m[-shift:], p[: n + shift]
+
+
+def _shift_order(kmax: int) -> np.ndarray:
+    """Shifts in the standard's priority: 0, +1, -1, +2, -2, ... (+: prediction lags)."""
+    ks = np.arange(1, kmax + 1)
+    return np.concatenate([[0], np.stack([ks, -ks], axis=1).ravel()]).astype(np.int64)
+
+
+def _approx_correlations(m: np.ndarray, p: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Pearson correlation at every shift from prefix sums and an FFT cross-correlation."""
+    n = m.size
+    a, b = m - m.mean(), p - p.mean()
+    ca = np.concatenate([[0.0], np.cumsum(a)])
+    cb = np.concatenate([[0.0], np.cumsum(b)])
+    caa = np.concatenate([[0.0], np.cumsum(a * a)])
+    cbb = np.concatenate([[0.0], np.cumsum(b * b)])
+    cross = sps.correlate(a, b, mode="full", method="fft")  # [n-1+k] = Σ a[i+k] b[i]
+    k = np.abs(shifts)
+    lag = shifts >= 0
+    length = (n - k).astype(np.float64)
+    # prediction lags (shift > 0): a[0:n-k] with b[k:n]; else a[k:n] with b[0:n-k]
+    a0 = np.where(lag, 0, k)
+    b0 = np.where(lag, k, 0)
+    sa = ca[a0 + n - k] - ca[a0]
+    sb = cb[b0 + n - k] - cb[b0]
+    saa = caa[a0 + n - k] - caa[a0]
+    sbb = cbb[b0 + n - k] - cbb[b0]
+    sab = cross[n - 1 - shifts]
+    var_a = length * saa - sa * sa
+    var_b = length * sbb - sb * sb
+    cov = length * sab - sa * sb
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = cov / np.sqrt(var_a * var_b)
+    rho = np.where(np.isfinite(rho), rho, 0.0)
+    return np.clip(rho, -1.0, 1.0)
+
+
+def phase_shift(measured: np.ndarray, predicted: np.ndarray, config=None) -> int:
+    """The standard's phase shift in samples (positive: the prediction lags)."""
+    cfg = config or ISORatingConfig()
+    m, p = measured, predicted
+    n = m.size
+    kmax = int(np.floor(n * cfg.max_shift_fraction))
+    shifts = _shift_order(kmax)
+    rho = _approx_correlations(m, p, shifts)
+    # windows with an exactly constant side have correlation 0 by definition
+    lead_m, trail_m = _run_lengths(m)
+    lead_p, trail_p = _run_lengths(p)
+    length = n - np.abs(shifts)
+    pos = shifts >= 0
+    flat_m = np.where(pos, length <= lead_m, length <= trail_m)
+    flat_p = np.where(pos, length <= trail_p, length <= lead_p)
+    flat = flat_m | flat_p
+    rho[flat] = 0.0
+    exact = flat.copy()
+    best = 0.0 if flat.any() else -np.inf
+    for idx in np.argsort(-rho, kind="stable"):
+        if exact[idx]:
+            continue
+        if rho[idx] < best - REFINE_TOL:
+            break
+        rho[idx] = _pearson(*_windows(m, p, int(shifts[idx])))
+        exact[idx] = True
+        best = max(best, rho[idx])
+    # every unrefined shift is provably below the best; near-equal maxima are ties
+    winners = exact & (rho >= best - TIE_TOL)
+    return int(shifts[int(np.argmax(winners))])
+
+
+def phase_rating(shift: int, n: int, config=None) -> float:
+    """Phase sub-rating EP of a shift of ``shift`` samples on curves of N = ``n``."""
+    cfg = config or ISORatingConfig()
+    limit = n * cfg.max_shift_fraction
+    if shift == 0:
+        return 1.0
+    if abs(shift) >= limit:
+        return 0.0
+    return float(((limit - abs(shift)) / limit) ** cfg.phase_exponent)
+
+
+def _diagonal_terms(xw, yw, x0: int, y0: int, u0: int, u1: int):
+    """Data terms of anti-diagonals u0..u1-1 of one parity, shape (u1-u0, width).
+
+    xw, yw: sliding windows of the padded x and of the reversed padded y. Row r,
+    column c pairs xp[x0 + u + c] with yp[y0 + u - c] (u = u0 + r); returns the local
+    cost (x - y)² and the path-sum increment |x - y| + 1j·|y|.
+    """
+    m = yw.shape[0] + yw.shape[1] - 1
+    xs = xw[x0 + u0 : x0 + u1]
+    ys = yw[m - y0 - u1 : m - y0 - u0][::-1]
+    inc = np.empty(xs.shape, complex)
+    with np.errstate(invalid="ignore"):
+        d = xs - ys
+        np.abs(d, out=inc.real)
+        np.abs(ys, out=inc.imag)
+        return np.square(d, out=d), inc
+
+
+def dtw_path_sums(x: np.ndarray, y: np.ndarray, band: int, block: int = 32):
+    """Banded DTW of x (rows i) against y (columns j), both of length L.
+
+    Local cost (x_i - y_j)², steps (1,0), (0,1), (1,1) of weight 1, cells |i - j| <= band.
+    Returns (Σ|x_i - y_j|, Σ|y_j|) over the path that back-tracking from (L-1, L-1)
+    takes, preferring (i-1, j), then (i, j-1), then (i-1, j-1) on equal cumulative cost.
+
+    Anti-diagonal s = i + j is swept in two parities: even s = 2u holds i = u + e,
+    j = u - e; odd s = 2u + 1 holds i = u + e + 1, j = u - e. Each parity keeps one
+    row of cumulative cost and one of path sums (as complex Σ|x-y| + 1j·Σ|y|), with an
+    inf sentinel column each side, so memory is O(L) and no L x L matrix is formed.
+    Out-of-matrix cells see +inf samples and so carry infinite cost.
+    """
+    n = x.size
+    if y.size != n or not 0 <= band < n:
+        raise ValueError("dtw_path_sums needs equal lengths and 0 <= band < L")
+    half, lo_o, hi_o = band // 2, -((band + 1) // 2), (band - 1) // 2
+    we, wo = 2 * half + 1, hi_o - lo_o + 1
+    pad = np.full(band + 2, np.inf)
+    xp, yp = np.concatenate([pad, x, pad]), np.concatenate([pad, y, pad])
+    yr, base = yp[::-1].copy(), pad.size
+    ce, co = np.full(we + 2, np.inf), np.full(wo + 2, np.inf)
+    ae, ao = np.zeros(we + 2, complex), np.zeros(wo + 2, complex)
+    xwe, ywe = sliding_window_view(xp, we), sliding_window_view(yr, we)
+    xwo, ywo = sliding_window_view(xp, wo), sliding_window_view(yr, wo)
+    sq, inc = _diagonal_terms(xwe, ywe, base - half, base + half, 0, 1)
+    ce[1 + half], ae[1 + half] = sq[0, half], inc[0, half]  # cell (0, 0)
+    # views: the current row of each parity and its predecessors in the other parity
+    c_e, c_o, a_e, a_o = ce[1 : we + 1], co[1 : wo + 1], ae[1 : we + 1], ao[1 : wo + 1]
+    ke, ko = -half - lo_o, lo_o + half + 1  # offset of 'up' in the other parity's buffer
+    e_up, e_left, ea_up, ea_left = co[ke : ke + we], co[ke + 1 : ke + 1 + we], ao[ke:], ao[ke + 1 :]
+    o_up, o_left, oa_up, oa_left = ce[ko : ko + wo], ce[ko + 1 : ko + 1 + wo], ae[ko:], ae[ko + 1 :]
+    ea_up, ea_left, oa_up, oa_left = ea_up[:we], ea_left[:we], oa_up[:wo], oa_left[:wo]
+    tle, tde, be = np.empty(we, bool), np.empty(we, bool), np.empty(we)
+    tlo, tdo, bo = np.empty(wo, bool), np.empty(wo, bool), np.empty(wo)
+    less, minimum, where, add = np.less, np.minimum, np.where, np.add
+    with np.errstate(invalid="ignore"):
+        for b0 in range(1, n, block):
+            b1 = min(n, b0 + block)
+            sq_o, inc_o = _diagonal_terms(xwo, ywo, base + 1 + lo_o, base - lo_o, b0 - 1, b1 - 1)
+            sq_e, inc_e = _diagonal_terms(xwe, ywe, base - half, base + half, b0, b1)
+            for r in range(b1 - b0):
+                less(o_left, o_up, out=tlo)  # odd diagonal 2u - 1
+                minimum(o_up, o_left, out=bo)
+                less(c_o, bo, out=tdo)
+                minimum(bo, c_o, out=bo)
+                sel = where(tdo, a_o, where(tlo, oa_left, oa_up))
+                add(bo, sq_o[r], out=c_o)
+                add(sel, inc_o[r], out=a_o)
+                less(e_left, e_up, out=tle)  # even diagonal 2u
+                minimum(e_up, e_left, out=be)
+                less(c_e, be, out=tde)
+                minimum(be, c_e, out=be)
+                sel = where(tde, a_e, where(tle, ea_left, ea_up))
+                add(be, sq_e[r], out=c_e)
+                add(sel, inc_e[r], out=a_e)
+    end = ae[1 + half]  # cell (L-1, L-1) on the last even diagonal, e = 0
+    return float(end.real), float(end.imag)
+
+
+def _ratio(num: float, den: float) -> float:
+    """num / den with 0/0 = 0 and x/0 = inf (the degenerate-denominator rule)."""
+    if den == 0.0:
+        return 0.0 if num == 0.0 else math.inf
+    return num / den
+
+
+def _limited_score(error: float, limit: float, exponent: float, zero_at_limit: bool) -> float:
+    """((limit - e)/limit)^k clipped to [0, 1]; 1 at e = 0."""
+    if error <= 0.0:
+        return 1.0
+    if error > limit or (zero_at_limit and error >= limit):
+        return 0.0
+    return float(((limit - error) / limit) ** exponent)
+
+
+def magnitude_rating(meas_shifted: np.ndarray, pred_shifted: np.ndarray, config=None) -> float:
+    """EEARTH magnitude sub-rating EM of the phase-shifted, truncated curves."""
+    cfg = config or ISORatingConfig()
+    band = math.ceil(cfg.dtw_band_fraction * meas_shifted.size) - 1
+    num, den = dtw_path_sums(pred_shifted, meas_shifted, max(band, 0))
+    return _limited_score(_ratio(num, den), cfg.magnitude_limit, cfg.magnitude_exponent, False)
+
+
+def smoothed_derivative(curve: np.ndarray, dt: float, window: int = 9) -> np.ndarray:
+    """Central-difference derivative (one-sided at the ends) smoothed by a centred moving
+    average of ``window`` points whose window shrinks symmetrically at the ends.
+
+    curve: shape (L,), L >= window; returns shape (L,) in curve units per second.
+    """
+    d = np.empty_like(curve)
+    d[1:-1] = (curve[2:] - curve[:-2]) / (2.0 * dt)
+    d[0] = (curve[1] - curve[0]) / dt
+    d[-1] = (curve[-1] - curve[-2]) / dt
+    half = window // 2
+    out = np.empty_like(d)
+    out[half : d.size - half] = np.convolve(d, np.full(window, 1.0 / window), mode="valid")
+    for i in range(half):
+        width = 2 * i + 1
+        out[i] = d[:width].sum() / width
+        out[-1 - i] = d[-width:].sum() / width
+    return out
+
+
+def slope_rating(meas_shifted: np.ndarray, pred_shifted: np.ndarray, dt: float, config=None):
+    """Slope sub-rating ES of the phase-shifted, truncated curves."""
+    cfg = config or ISORatingConfig()
+    dm = smoothed_derivative(meas_shifted, dt, cfg.slope_window)
+    dp = smoothed_derivative(pred_shifted, dt, cfg.slope_window)
+    err = _ratio(float(np.abs(dp - dm).sum()), float(np.abs(dm).sum()))
+    return _limited_score(err, cfg.slope_limit, cfg.slope_exponent, True)
+
+
+def rate(
+    measured,
+    predicted,
+    dt: float,
+    config: ISORatingConfig | None = None,
+    label: str = "signal",
+) -> Rating:
+    """ISO/TS 18571 rating of ``predicted`` against ``measured``.
+
+    measured, predicted: shape (N,), same unit, on one grid of spacing dt seconds.
+    ``label`` names the pair in error messages (e.g. ``"trial r1 channel vx"``).
+    """
+    cfg = config or ISORatingConfig()
+    m, p = _check_pair(measured, predicted, dt, cfg, label)
+    z = corridor_rating(m, p, cfg)
+    shift = phase_shift(m, p, cfg)
+    ep = phase_rating(shift, m.size, cfg)
+    ms, ps = _windows(m, p, shift)
+    em = magnitude_rating(ms, ps, cfg)
+    es = slope_rating(ms, ps, dt, cfg)
+    overall = (
+        cfg.weight_corridor * z
+        + cfg.weight_phase * ep
+        + cfg.weight_magnitude * em
+        + cfg.weight_slope * es
+    )
+    return Rating(z, ep, em, es, float(overall), grade_of(overall, cfg), shift)
+
+
+class LowpassConfig(StrictModel):
+    """The identical conditioning of §V-F: zero-phase Butterworth low-pass."""
+
+    cutoff_hz: float = Field(5.0, gt=0)
+    order: int = Field(4, ge=1, le=12, description="per pass (zero-phase doubles it)")
+
+
+def lowpass(signal, dt: float, cutoff_hz: float = 5.0, order: int = 4, label: str = "signal"):
+    """Zero-phase Butterworth low-pass (forward-backward, second-order sections).
+
+    signal: shape (N,), dt in s, cutoff in Hz below the Nyquist frequency 1/(2 dt).
+    """
+    a = np.asarray(signal, dtype=np.float64)
+    if a.ndim != 1:
+        raise DataError(f"{label}: low-pass needs a 1-D signal, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise DataError(f"{label}: low-pass input has non-finite samples")
+    if not (math.isfinite(dt) and dt > 0):
+        raise DataError(f"{label}: dt must be positive, got {dt!r}")
+    nyquist = 0.5 / dt
+    if not 0 < cutoff_hz < nyquist:
+        raise ConfigError(f"low-pass cutoff {cutoff_hz} Hz must lie in (0, {nyquist:g}) Hz")
+    sos = sps.butter(order, cutoff_hz, btype="low", fs=1.0 / dt, output="sos")
+    padlen = 3 * (2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
+    if a.size <= padlen:
+        raise DataError(
+            f"{label}: {a.size} samples; the order-{order} zero-phase low-pass needs > {padlen}"
+        )
+    return sps.sosfiltfilt(sos, a)
