@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+import scipy.io
 
 from parknss.cli import main
 from parknss.config import CONFIG_DIR
@@ -88,6 +89,22 @@ def test_write_campaign_refuses_invalid_trial(trial, tmp_path):
     with pytest.raises(DataError, match=r"park_in_left_r1\.parquet: channel 'gear': value 2"):
         write_campaign(Campaign([_modified(trial, gear=g)]), tmp_path / "c")
     assert not (tmp_path / "c" / "campaign.json").exists()
+
+
+def test_mat_single_struct_of_row_vectors(trial, tmp_path):
+    """The other documented .mat layout: one struct whose fields are 1 x T channels."""
+    fields = {k: v.reshape(1, -1) for k, v in trial.channels.items()}
+    scipy.io.savemat(tmp_path / "park_in_left_r2.mat", {"log": fields})
+    back = read_trial(tmp_path / "park_in_left_r2.mat")
+    assert (back.id, back.repetition) == ("park_in_left_r2", 2)
+    _same(trial, back, atol=0.0)
+
+
+def test_newer_schema_version_is_refused(trial, tmp_path):
+    p = write_trial_csv(trial, tmp_path / "x_r1.csv")
+    p.write_text(p.read_text().replace('"schema_version": "1"', '"schema_version": "9"'))
+    with pytest.raises(DataError, match="written with schema version '9'"):
+        read_trial(p)
 
 
 # --------------------------------------------------------------- campaign errors

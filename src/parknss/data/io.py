@@ -98,6 +98,12 @@ def _parse_meta(text: str | bytes, source: Path) -> dict:
         raise DataError(f"{source}: trial metadata {META_KEY!r} is not valid JSON") from exc
     if not isinstance(meta, dict):
         raise DataError(f"{source}: trial metadata {META_KEY!r} is not a JSON object")
+    version = str(meta.get("schema_version", SCHEMA_VERSION))
+    if version != SCHEMA_VERSION:
+        raise DataError(
+            f"{source}: written with schema version {version!r}, this parknss reads "
+            f"{SCHEMA_VERSION!r}"
+        )
     return meta
 
 

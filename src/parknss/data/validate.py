@@ -23,7 +23,6 @@ from parknss.signals import (
     DT,
     REQUIRED_CHANNELS,
     SAMPLE_RATE_HZ,
-    TRUTH_PREFIX,
 )
 
 DATA_CONFIG_YAML = CONFIG_DIR / "data.yaml"
@@ -256,8 +255,3 @@ def validate_trial(trial: Trial, source: str, config: ValidationConfig | None = 
         sample_rate_hz=float(trial.sample_rate_hz),
         provenance=trial.provenance,
     )
-
-
-def is_truth_channel(name: str) -> bool:
-    """True for the ground-truth ``truth_*`` channels of synthetic trials."""
-    return name.startswith(TRUTH_PREFIX)
