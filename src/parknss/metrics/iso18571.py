@@ -66,6 +66,7 @@ from parknss.errors import ConfigError, DataError
 
 GRADES: tuple[str, ...] = ("Excellent", "Good", "Fair", "Poor")
 REFINE_TOL = 1.0e-7  # shifts this close to the best correlation are re-evaluated exactly
+COND_TOL = 1.0e-6  # prefix-sum variances below this share of Σa² are re-evaluated exactly
 TIE_TOL = 1.0e-12  # exact correlations this close to the best are ties (rounding noise)
 
 
@@ -227,7 +228,10 @@ def _shift_order(kmax: int) -> np.ndarray:
 
 
 def _approx_correlations(m: np.ndarray, p: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-    """Pearson correlation at every shift from prefix sums and an FFT cross-correlation."""
+    """Pearson correlation at every shift from prefix sums and an FFT cross-correlation.
+
+    Accurate to ~1e-10 where it is not 1; ill-conditioned shifts read 1 (refine them).
+    """
     n = m.size
     a, b = m - m.mean(), p - p.mean()
     ca = np.concatenate([[0.0], np.cumsum(a)])
@@ -250,9 +254,10 @@ def _approx_correlations(m: np.ndarray, p: np.ndarray, shifts: np.ndarray) -> np
     var_b = length * sbb - sb * sb
     cov = length * sab - sa * sb
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = cov / np.sqrt(var_a * var_b)
-    rho = np.where(np.isfinite(rho), rho, 0.0)
-    return np.clip(rho, -1.0, 1.0)
+        rho = np.clip(cov / np.sqrt(var_a * var_b), -1.0, 1.0)
+    # where cancellation leaves fewer than ~10 digits, report 1 so the shift is re-evaluated
+    shaky = ~((var_a > COND_TOL * length * saa) & (var_b > COND_TOL * length * sbb))
+    return np.where(shaky | ~np.isfinite(rho), 1.0, rho)
 
 
 def phase_shift(measured: np.ndarray, predicted: np.ndarray, config=None) -> int:
