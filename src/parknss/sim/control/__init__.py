@@ -1,0 +1,1 @@
+"""Tracking and the command interface: predictive steering tracker, gear/longitudinal logic."""

@@ -1,0 +1,201 @@
+"""The command interface of §IV-C: tracker requests -> {gear, torque_cmd, decel_cmd, steer_cmd}.
+
+Three parts, run once per 10 ms on what the car's bus reports (measured vx, engaged gear):
+
+* **Gear state machine.** The commanded gear follows the requested direction (+1 drive,
+  -1 reverse, 0 park) only at confirmed standstill: the brake-hold applied and the
+  measured |vx| below ``standstill_speed_ms`` for ``standstill_time_s`` without a break;
+  reverse <-> drive shifts go directly, never through neutral. Park (gear 0) pins the
+  state at rest: torque_cmd is 0 whenever the commanded gear is 0 (neutral/park never
+  carries torque), and the brake-hold stays applied.
+* **Longitudinal controller.** A PI on the speed along the gear direction with request
+  feed-forward gives a desired acceleration a (m/s²). With hysteresis (±
+  ``hysteresis_ms2``) it is sent either as a drive torque (torque_cmd = offset +
+  gain·a >= 0, decel_cmd = 0) or as a deceleration request (decel_cmd = a <= 0,
+  torque_cmd = 0), never both. A launch from standstill ramps a minimum torque until
+  the wheel speed leaves the standstill band (pushing through an auto-hold).
+* **Brake-hold.** Whenever the car must stand (a stop, a gear change, park, or a speed
+  request of 0) the commanded deceleration is raised to ``hold_decel_ms2`` and keeps
+  rising at ``hold_ramp_ms3`` (up to ``hold_max_ms2``) while the car has not yet stopped,
+  then held: a fixed gentle brake would lose to the creep torque.
+
+Besides the Commands the interface exposes ``speed_target`` (signed m/s: what its speed
+controller is steering to after gear logic and hold), which the ideal kinematic plant
+executes directly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import Field
+
+from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.errors import ConfigError, ParknssError
+from parknss.plant import Commands, PlantOutput
+from parknss.signals import BLIND_ZONE_MS, DT
+
+HOLD, LAUNCH, DRIVE = "hold", "launch", "drive"
+
+
+class InterfaceConfig(StrictModel):
+    """Gains of the command interface (configs/interface.yaml)."""
+
+    standstill_speed_ms: float = Field(
+        BLIND_ZONE_MS, gt=0, description="measured |vx| below this counts as stopped, m/s"
+    )
+    standstill_time_s: float = Field(0.3, ge=0, description="stop confirmed after, s")
+    kp: float = Field(1.5, ge=0, description="speed-error gain, (m/s²)/(m/s)")
+    ki: float = Field(1.0, ge=0, description="speed-error integral gain, (m/s²)/m")
+    kff: float = Field(1.0, ge=0, description="feed-forward of the requested acceleration, -")
+    integral_max_ms2: float = Field(0.6, ge=0, description="integral clamp, m/s²")
+    hysteresis_ms2: float = Field(0.05, ge=0, description="torque/brake switch band, m/s²")
+    torque_per_accel: float = Field(90.0, gt=0, description="drive torque per m/s², N·m/(m/s²)")
+    torque_offset_nm: float = Field(10.0, ge=0, description="torque at a = 0 (resistance), N·m")
+    torque_max_nm: float = Field(150.0, gt=0, description="torque command ceiling, N·m")
+    decel_min_ms2: float = Field(-2.0, lt=0, description="strongest decel command, m/s²")
+    hold_decel_ms2: float = Field(0.6, gt=0, description="brake-hold initial decel, m/s²")
+    hold_ramp_ms3: float = Field(1.0, ge=0, description="brake-hold rise while moving, m/s³")
+    hold_max_ms2: float = Field(2.0, gt=0, description="brake-hold ceiling, m/s²")
+    launch_torque_nm: float = Field(40.0, ge=0, description="minimum launch torque, N·m")
+    launch_rate_nms: float = Field(150.0, gt=0, description="launch torque ramp, N·m/s")
+    steer_lock_deg: float = Field(400.0, gt=0, description="steer_cmd clamp, ±deg")
+    steer_rate_dps: float = Field(0.0, ge=0, description="steer_cmd slew limit (0: none), deg/s")
+
+
+def load_interface_config(path: str | Path | None = None) -> InterfaceConfig:
+    """Read configs/interface.yaml (or ``path``); defaults when the file is absent."""
+    p = Path(path) if path is not None else CONFIG_DIR / "interface.yaml"
+    cfg = load_config(InterfaceConfig, p if (path is not None or p.is_file()) else None)
+    if cfg.hold_max_ms2 < cfg.hold_decel_ms2:
+        raise ConfigError(f"{p}: hold_max_ms2 must be >= hold_decel_ms2")
+    return cfg
+
+
+@dataclass(frozen=True)
+class Request:
+    """What the tracker asks for, once per 10 ms.
+
+    Attributes:
+        direction: +1 drive, -1 reverse, 0 park.
+        speed: speed magnitude along the direction, m/s (>= 0; 0 means stop and hold).
+        steer: steering-wheel angle, deg.
+        accel: rate of change of the speed request, m/s² (feed-forward).
+    """
+
+    direction: int
+    speed: float
+    steer: float
+    accel: float = 0.0
+
+
+class CommandInterface:
+    """Turns :class:`Request` into :class:`~parknss.plant.Commands` (see module docstring)."""
+
+    def __init__(self, cfg: InterfaceConfig | None = None, dt: float = DT) -> None:
+        self.cfg = cfg or InterfaceConfig()
+        self.dt = float(dt)
+        self.reset()
+
+    def reset(self) -> None:
+        """At rest in park with the brake-hold applied; standstill not yet confirmed."""
+        self.gear = 0
+        self.mode = HOLD
+        self.hold_level = self.cfg.hold_decel_ms2
+        self.integral = 0.0
+        self.still_time = 0.0
+        self.launch_time = 0.0
+        self.braking = True
+        self.speed_target = 0.0
+        self.steer = 0.0
+        self.shifts = 0
+
+    @property
+    def standstill(self) -> bool:
+        """Standstill confirmed: held with measured |vx| in the band for the confirm time."""
+        return self.still_time >= self.cfg.standstill_time_s - 1e-9
+
+    def step(self, req: Request, y: PlantOutput) -> Commands:
+        """One 10 ms update from the request and the bus output ``y`` of this sample."""
+        c, dt = self.cfg, self.dt
+        if req.direction not in (-1, 0, 1):
+            raise ConfigError(f"command interface: request direction {req.direction!r}")
+        for name, v in (
+            ("request speed", req.speed),
+            ("request accel", req.accel),
+            ("request steer", req.steer),
+            ("measured vx", y.vx),
+        ):
+            if not math.isfinite(v):
+                raise ParknssError(f"command interface: {name} is not finite ({v!r})")
+        if req.speed < 0.0:
+            raise ParknssError(f"command interface: request speed {req.speed!r} < 0")
+        speed, u = req.speed, y.vx
+        still = self.mode == HOLD and abs(u) < c.standstill_speed_ms
+        self.still_time = self.still_time + dt if still else 0.0
+        if req.direction != self.gear and self.mode == HOLD and self.standstill:
+            self.gear = req.direction  # R <-> D directly; 0 only as park
+            self.shifts += 1
+        go = self.gear != 0 and req.direction == self.gear and y.gear == self.gear and speed > 0.0
+        if not go:
+            torque, decel = self._hold()
+        else:
+            torque, decel = self._drive(speed, req.accel, u)
+        if self.gear == 0:
+            torque = 0.0  # neutral/park never carries torque
+        return Commands(self.gear, torque, decel, self._steer(req.steer))
+
+    # ------------------------------------------------------------------ parts
+    def _hold(self) -> tuple[float, float]:
+        """Brake-hold: raise the deceleration until stopped, then keep it; no torque."""
+        c = self.cfg
+        if self.mode != HOLD:
+            self.mode = HOLD
+            self.hold_level = c.hold_decel_ms2
+        elif not self.standstill:
+            self.hold_level = min(self.hold_level + c.hold_ramp_ms3 * self.dt, c.hold_max_ms2)
+        self.integral = 0.0
+        self.speed_target = 0.0
+        return 0.0, -self.hold_level
+
+    def _drive(self, speed: float, accel: float, u: float) -> tuple[float, float]:
+        """PI speed control along the gear direction, torque or brake with hysteresis."""
+        c, dt = self.cfg, self.dt
+        if self.mode == HOLD:
+            self.mode, self.launch_time, self.integral, self.braking = LAUNCH, 0.0, 0.0, False
+        along = self.gear * u
+        err = speed - along
+        a = c.kff * accel + c.kp * err + self.integral
+        self.integral = min(
+            max(self.integral + c.ki * err * dt, -c.integral_max_ms2), c.integral_max_ms2
+        )
+        if self.braking and a > c.hysteresis_ms2:
+            self.braking = False
+        elif not self.braking and a < -c.hysteresis_ms2:
+            self.braking = True
+        if self.mode == LAUNCH:
+            self.launch_time += dt
+            if abs(u) >= c.standstill_speed_ms:
+                self.mode = DRIVE
+        self.speed_target = self.gear * speed
+        if self.mode == LAUNCH:
+            ramp = min(c.launch_rate_nms * self.launch_time, c.launch_torque_nm)
+            tq = max(ramp, c.torque_offset_nm + c.torque_per_accel * a)
+            self.braking = False
+            return min(tq, c.torque_max_nm), 0.0
+        if self.braking:
+            return 0.0, max(min(a, 0.0), c.decel_min_ms2)
+        tq = c.torque_offset_nm + c.torque_per_accel * a
+        return min(max(tq, 0.0), c.torque_max_nm), 0.0
+
+    def _steer(self, target: float) -> float:
+        """Clamp (and optionally slew-limit) the steering request, deg."""
+        c = self.cfg
+        t = min(max(target, -c.steer_lock_deg), c.steer_lock_deg)
+        if c.steer_rate_dps > 0.0:
+            step = c.steer_rate_dps * self.dt
+            t = self.steer + min(max(t - self.steer, -step), step)
+        self.steer = t
+        return t
