@@ -313,3 +313,146 @@ def _outcome(scene, traj, plant, cfg, geom, series, reason, iface, wall0) -> Out
 def not_plannable(plant_name: str, plan: Plan) -> Outcome:
     """The outcome recorded for a cell the planner could not solve."""
     return Outcome(False, "not plannable", plant_name, duration_s=0.0, wall_s=plan.plan_s)
+
+
+# ---------------------------------------------------------------------------------------
+# Cells and grids
+
+
+def run_cell(
+    scene,
+    plants: list[str],
+    cfg: ClosedLoopConfig | None = None,
+    interface_cfg: InterfaceConfig | None = None,
+    planning_config: str | Path | None = None,
+    geom: VehicleGeometry | None = None,
+    trajectory: Trajectory | None = None,
+) -> tuple[Plan, list[Outcome]]:
+    """Plan ``scene`` once (unless ``trajectory`` is given) and execute it under each plant."""
+    from parknss.sim.plants import make_plant
+
+    cfg = cfg or ClosedLoopConfig()
+    geom = geom or VehicleGeometry()
+    if trajectory is None:
+        plan = plan_scene(scene, planning_config, geom, cfg.steer_reserve)
+    else:
+        plan = Plan(trajectory, "given", trajectory)
+    outcomes = []
+    mpc = PreviewMpc(cfg.tracker.mpc)
+    for kind in plants:
+        plant = make_plant(
+            kind,
+            geom=geom,
+            vehicle_yaml=cfg.reference_vehicle,
+            chain_path=cfg.chain_path,
+            seed=cfg.plant_seed,
+        )
+        if plan.trajectory is None:
+            outcomes.append(not_plannable(plant.name, plan))
+        else:
+            outcomes.append(execute(scene, plan.trajectory, plant, cfg, interface_cfg, geom, mpc))
+    return plan, outcomes
+
+
+def cell_job(
+    grid: str,
+    index: int,
+    plants: list[str],
+    closed_loop_config: str | None = None,
+    interface_config: str | None = None,
+    interface_overrides: dict | None = None,
+    planning_config: str | None = None,
+    scenarios_config: str | None = None,
+) -> list[dict]:
+    """Executor job: one cell of grid "36" or "252" under each plant; JSON rows."""
+    from parknss.sim import scenarios as sc
+    from parknss.sim.control.interface import load_interface_config
+
+    scfg = sc.load_scenarios_config(scenarios_config)
+    scene = sc.robust_scene(index, scfg) if grid == "252" else sc.grid_scene(index, scfg)
+    cfg = load_closed_loop_config(closed_loop_config)
+    icfg = load_interface_config(interface_config)
+    if interface_overrides:
+        icfg = type(icfg).model_validate({**icfg.model_dump(), **interface_overrides})
+    plan, outcomes = run_cell(scene, plants, cfg, icfg, planning_config)
+    rows = []
+    for o in outcomes:
+        row = o.to_json()
+        row.update(
+            grid=grid,
+            index=index,
+            cell=scene.meta.cell,
+            name=scene.meta.name,
+            perturbation=scene.meta.perturbation,
+            plannable=plan.trajectory is not None,
+            plan_reason=plan.reason,
+            refined=plan.refined,
+            plan_s=round(plan.plan_s, 4),
+            plan_clearance_cm=None
+            if plan.min_clearance_m is None
+            else plan.min_clearance_m * 100.0,
+        )
+        rows.append(row)
+    return rows
+
+
+@dataclass
+class GridSummary:
+    """Table V statistics of one plant over a set of cells (goal errors over every
+    executed cell, failed runs at their final pose; cm, s)."""
+
+    plant: str
+    cells: int
+    plannable: int
+    completed: int
+    goal_mean_cm: float | None
+    goal_median_cm: float | None
+    goal_max_cm: float | None
+    clearance_mean_cm: float | None
+    under_floor: int
+    over_20cm_goal: int
+    collisions: int
+    livelocks: int
+    timeouts: int
+    duration_mean_s: float | None
+    sim_s: float
+    wall_s: float
+
+    @property
+    def realtime_factor(self) -> float | None:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else None
+
+    def to_json(self) -> dict:
+        out = dict(self.__dict__)
+        out["realtime_factor"] = self.realtime_factor
+        return out
+
+
+def summarize(rows: list[dict], plant: str, floor_cm: float = 20.0) -> GridSummary:
+    """Aggregate the rows of one plant (see :class:`GridSummary`)."""
+    mine = [r for r in rows if r["plant"] == plant]
+    ran = [r for r in mine if r["plannable"]]
+    goals = np.array([r["goal_error_cm"] for r in ran], float)
+    clr = np.array([r["clearance_cm"] for r in ran if r["clearance_cm"] is not None], float)
+
+    def stat(fn, a):
+        return float(fn(a)) if len(a) else None
+
+    return GridSummary(
+        plant=plant,
+        cells=len(mine),
+        plannable=len(ran),
+        completed=sum(r["completed"] for r in ran),
+        goal_mean_cm=stat(np.mean, goals),
+        goal_median_cm=stat(np.median, goals),
+        goal_max_cm=stat(np.max, goals),
+        clearance_mean_cm=stat(np.mean, clr),
+        under_floor=int(np.sum(clr < floor_cm)),
+        over_20cm_goal=int(np.sum(goals > 20.0)),
+        collisions=sum(r["reason"] == "collision" for r in ran),
+        livelocks=sum(r["reason"] == "livelock" for r in ran),
+        timeouts=sum(r["reason"] == "timeout" for r in ran),
+        duration_mean_s=stat(np.mean, np.array([r["duration_s"] for r in ran], float)),
+        sim_s=float(sum(r["duration_s"] for r in ran)),
+        wall_s=float(sum(r["wall_s"] for r in mine)),
+    )

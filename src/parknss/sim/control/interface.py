@@ -168,9 +168,10 @@ class CommandInterface:
         along = self.gear * u
         err = speed - along
         a = c.kff * accel + c.kp * err + self.integral
-        self.integral = min(
-            max(self.integral + c.ki * err * dt, -c.integral_max_ms2), c.integral_max_ms2
-        )
+        if self.mode != LAUNCH:  # the launch ramp, not the integral, breaks the car away
+            self.integral = min(
+                max(self.integral + c.ki * err * dt, -c.integral_max_ms2), c.integral_max_ms2
+            )
         if self.braking and a > c.hysteresis_ms2:
             self.braking = False
         elif not self.braking and a < -c.hysteresis_ms2:

@@ -9,9 +9,12 @@ does differently (rack nonlinearity, slip, lag).
 Speed: indexed by *distance to go*, never by the clock (open-loop replay of a planned
 speed profile diverges, §V-G): v = min(v_max, the segment's planned speed at the current
 distance (if any; floored), the steering-rate cap (the smoothed reference steering must
-not need more than ``steer_rate_dps``; floored at ``v_floor_ms``), √(2·a_dec·(d_togo −
-tol)), ramp-up from the last request at ``accel_ms2``). The stop is requested when the
-distance to go falls below ``stop_tolerance_m`` + v·``stop_latency_s``.
+not need more than ``steer_rate_dps``; floored at ``v_floor_ms``) -- these caps made
+reachable by braking at ``decel_ms2`` before them --, √(2·a_dec·(d_togo −
+tol)), ramp-up from the last request at ``accel_ms2`` and at most ``lead_ms`` above the
+measured speed, so the request does not run away from a car still held at a launch).
+The stop is requested when the distance to go falls below ``stop_tolerance_m`` +
+v·``stop_latency_s``.
 
 Phases per segment: ALIGN (stand, request the segment's gear, turn the wheel to the
 MPC's steering at standstill until within ``steer_settle_deg``), DRIVE, STOP (request 0:
@@ -43,6 +46,7 @@ class TrackerConfig(StrictModel):
 
     v_max_ms: float = Field(0.75, gt=0, description="speed ceiling, m/s")
     accel_ms2: float = Field(0.4, gt=0, description="speed-request ramp-up, m/s²")
+    lead_ms: float = Field(0.15, gt=0, description="request at most this above vx, m/s")
     decel_ms2: float = Field(0.35, gt=0, description="approach deceleration, m/s²")
     v_floor_ms: float = Field(0.2, gt=0, description="lowest steering/planned speed cap, m/s")
     use_planned_speed: bool = Field(True, description="cap by the planned speed at s")
@@ -83,6 +87,7 @@ class Tracker:
             )
             for seg in traj.segments
         ]
+        self.caps = [self._cap_profile(r) for r in self.refs]
         self.mpc = mpc if mpc is not None else PreviewMpc(c.mpc)
         self.k_max = float(curvature(self.geom.steer_lock_deg, self.geom))
         self._done_length = np.concatenate([[0.0], np.cumsum([r.length for r in self.refs])])
@@ -137,7 +142,7 @@ class Tracker:
             togo = ref.length - proj.s
             v_est = max(abs(y.vx), self.v_ref)
             if togo > c.stop_tolerance_m + v_est * c.stop_latency_s:
-                v = self._speed(ref, proj.s, togo)
+                v = self._speed(ref, proj.s, togo, abs(y.vx))
                 accel = (v - self.v_ref) / self.dt
                 self.v_ref = v
                 return Request(d, v, self.steer, accel)
@@ -154,15 +159,25 @@ class Tracker:
             return Request(0, 0.0, self.steer)
         return Request(d, 0.0, self.steer)
 
-    def _speed(self, ref: PathReference, s: float, togo: float) -> float:
+    def _cap_profile(self, ref: PathReference) -> np.ndarray:
+        """Speed cap per reference point, m/s: v_max, the steering-rate cap and the planned
+        speed (both floored at v_floor), made reachable at the approach deceleration."""
+        c = self.cfg
+        cap = np.minimum(np.maximum(ref.v_steer, c.v_floor_ms), c.v_max_ms)
+        if c.use_planned_speed and ref.planned_speed is not None:
+            cap = np.minimum(cap, np.maximum(ref.planned_speed, c.v_floor_ms))
+        ds = np.diff(ref.s)
+        for i in range(len(cap) - 2, -1, -1):  # backward pass: brake in time for each cap
+            cap[i] = min(cap[i], math.sqrt(cap[i + 1] ** 2 + 2.0 * c.decel_ms2 * ds[i]))
+        return cap
+
+    def _speed(self, ref: PathReference, s: float, togo: float, speed: float) -> float:
         """Distance-indexed speed request, m/s (see module docstring)."""
         c = self.cfg
-        cap = max(ref.at(s, ref.v_steer), c.v_floor_ms)
-        if c.use_planned_speed and ref.planned_speed is not None:
-            cap = min(cap, max(ref.at(s, ref.planned_speed), c.v_floor_ms))
+        cap = ref.at(s, self.caps[self.index])
         approach = math.sqrt(2.0 * c.decel_ms2 * max(togo - c.stop_tolerance_m, 0.0))
-        ramp = self.v_ref + c.accel_ms2 * self.dt
-        return max(min(c.v_max_ms, cap, approach, ramp), 0.0)
+        ramp = min(self.v_ref + c.accel_ms2 * self.dt, speed + c.lead_ms)
+        return max(min(cap, approach, ramp), 0.0)
 
     def _steering(self, ref: PathReference, proj: Projection, y: PlantOutput) -> float:
         """Steering-wheel request (deg) from the preview MPC."""

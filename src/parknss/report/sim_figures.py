@@ -1,0 +1,124 @@
+"""Closed-loop figures: Fig. 8 (planned vs driven path in the scene) and Fig. 9 (vehicle
+states vx, ω_z, ax, ay under several plants on a common time axis)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from parknss.report.plan_figure import OBSTACLE_COLOURS
+from parknss.report.style import save, shade_reverse
+from parknss.signals import ms_to_kmh, rad_to_deg
+from parknss.sim.geometry import footprint
+from parknss.sim.trajectory import Trajectory
+from parknss.vehicle import VehicleGeometry
+
+PLANT_COLOURS = {"kinematic": "#00bcd4", "chain": "#e67e22", "reference": "#8e44ad"}
+PLANNED_COLOUR = "#27ae60"
+
+
+def _outline(ax, poly: np.ndarray, **kw) -> None:
+    closed = np.vstack([poly, poly[:1]])
+    ax.plot(closed[:, 0], closed[:, 1], **kw)
+
+
+def draw_driven(
+    scene,
+    trajectory: Trajectory,
+    runs: dict[str, dict[str, np.ndarray]],
+    path: str | Path,
+    geom: VehicleGeometry | None = None,
+    title: str | None = None,
+) -> Path:
+    """Fig. 8: the scene, the planned path (green) and each plant's driven rear-axle path.
+
+    ``runs`` maps a plant name to its time series (needs x, y, heading). The final
+    footprint of each run is outlined. Returns the PNG path.
+    """
+    geom = geom or VehicleGeometry()
+    xmin, ymin, xmax, ymax = scene.bounds
+    width = 12.0
+    height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
+    fig, ax = plt.subplots(figsize=(width, height + 1.0))
+    for ob in scene.obstacles:
+        colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
+        ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
+    first = True
+    for seg in trajectory.segments:
+        ax.plot(
+            seg.poses[:, 0],
+            seg.poses[:, 1],
+            "-" if seg.direction > 0 else "--",
+            color=PLANNED_COLOUR,
+            lw=2.2,
+            label="planned" if first else None,
+        )
+        first = False
+    for name, s in runs.items():
+        colour = PLANT_COLOURS.get(name, "#34495e")
+        ax.plot(s["x"], s["y"], "-", color=colour, lw=1.1, label=f"driven ({name})")
+        pose = (s["x"][-1], s["y"][-1], s["heading"][-1])
+        _outline(ax, footprint(pose, geom), color=colour, lw=1.0)
+    _outline(ax, footprint(scene.start, geom), color="#2471a3", lw=1.4, label="start")
+    _outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=1.4, ls=":", label="goal")
+    ax.set_aspect("equal")
+    ax.set_xlim(xmin - 0.5, xmax + 0.5)
+    ax.set_ylim(ymin - 0.5, ymax + 0.5)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title or f"{scene.meta.name}: planned vs driven")
+    ax.legend(loc="upper right", fontsize=8)
+    return save(fig, path)
+
+
+def _smooth(v: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average over n samples (edges use the available samples)."""
+    if n <= 1 or len(v) < 2:
+        return v
+    kernel = np.ones(n)
+    num = np.convolve(v, kernel, mode="same")
+    den = np.convolve(np.ones_like(v), kernel, mode="same")
+    return num / den
+
+
+def draw_states(
+    runs: dict[str, dict[str, np.ndarray]],
+    path: str | Path,
+    title: str = "",
+    smooth_s: float = 0.2,
+    dt: float = 0.01,
+) -> Path:
+    """Fig. 9: vx [km/h], ω_z [°/s], ax and ay [m/s²] of each plant on one time axis.
+
+    ax and ay are shown with a centred moving average of ``smooth_s`` seconds; reverse
+    gear of the first run is shaded. Returns the PNG path.
+    """
+    fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
+    n = max(1, round(smooth_s / dt))
+    rows = (
+        ("vx", "v_x [km/h]", ms_to_kmh, 1),
+        ("yaw_rate", "ω_z [°/s]", rad_to_deg, 1),
+        ("ax", f"a_x [m/s²] ({smooth_s:.1f} s avg)", lambda v: v, n),
+        ("ay", f"a_y [m/s²] ({smooth_s:.1f} s avg)", lambda v: v, n),
+    )
+    first = next(iter(runs.values()), None)
+    for ax, (key, label, conv, width) in zip(axes, rows, strict=True):
+        if first is not None:
+            shade_reverse(ax, first["t"], first["gear"])
+        for name, s in runs.items():
+            ax.plot(
+                s["t"],
+                _smooth(conv(np.asarray(s[key])), width),
+                color=PLANT_COLOURS.get(name, "#34495e"),
+                lw=1.0,
+                label=name,
+            )
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("t [s]")
+    if title:
+        axes[0].set_title(title)
+    return save(fig, path)
