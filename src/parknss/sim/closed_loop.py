@@ -79,6 +79,9 @@ class ClosedLoopConfig(StrictModel):
     steer_reserve: float = Field(
         0.1, ge=0, lt=0.5, description="fraction of the steering lock the plan leaves free"
     )
+    plan_margin_m: float | None = Field(
+        0.2, ge=0, description="planner clearance margin for closed-loop runs (None: planning.yaml)"
+    )
     tracker: TrackerConfig = TrackerConfig()
 
 
@@ -151,11 +154,13 @@ def plan_scene(
     planning_config: str | Path | None = None,
     geom: VehicleGeometry | None = None,
     steer_reserve: float = 0.0,
+    safety_margin_m: float | None = None,
 ) -> Plan:
     """Hybrid A* plus refinement (if installed and it passes the dense check).
 
     The planner and the refinement use :func:`planning_geometry` (``steer_reserve`` of
     the lock held back for feedback); the dense check uses the body of ``geom``.
+    ``safety_margin_m`` (m), when given, replaces the planning config's clearance margin.
     """
     from parknss.sim.planning.hybrid_astar import (
         HybridAStar,
@@ -165,6 +170,8 @@ def plan_scene(
 
     geom = planning_geometry(geom or VehicleGeometry(), steer_reserve)
     cfg = load_planning_config(planning_config)
+    if safety_margin_m is not None:
+        cfg = type(cfg).model_validate({**cfg.model_dump(), "safety_margin_m": safety_margin_m})
     t0 = time.perf_counter()
     res = HybridAStar(cfg, geom).plan(scene)
     if not res.found:
@@ -334,7 +341,7 @@ def run_cell(
     cfg = cfg or ClosedLoopConfig()
     geom = geom or VehicleGeometry()
     if trajectory is None:
-        plan = plan_scene(scene, planning_config, geom, cfg.steer_reserve)
+        plan = plan_scene(scene, planning_config, geom, cfg.steer_reserve, cfg.plan_margin_m)
     else:
         plan = Plan(trajectory, "given", trajectory)
     outcomes = []

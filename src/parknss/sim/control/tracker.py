@@ -54,7 +54,7 @@ class TrackerConfig(StrictModel):
     steer_smooth_m: float = Field(0.3, gt=0, description="reference steering smoothing, m")
     steer_lookahead_m: float = Field(0.4, ge=0, description="slow down this far ahead, m")
     stop_tolerance_m: float = Field(0.01, ge=0, description="stop this close to the end, m")
-    stop_latency_s: float = Field(0.1, ge=0, description="plus speed x this latency, s")
+    stop_latency_s: float = Field(0.0, ge=0, description="plus speed x this latency, s")
     steer_settle_deg: float = Field(5.0, gt=0, description="launch once steer within, deg")
     ref_step_m: float = Field(0.02, gt=0, description="reference point spacing, m")
     search_window_m: float = Field(1.0, gt=0, description="projection search ±window, m")
