@@ -234,6 +234,36 @@ class _Recorder:
         return {c: v[: self.n].copy() for c, v in self.data.items()}
 
 
+class _CollisionCheck:
+    """Exact footprint/obstacle overlap (SAT) for a batch of poses, with a bounding-circle
+    broad phase: only obstacles whose circle comes within reach of the batch are tested."""
+
+    def __init__(self, obstacles: list[np.ndarray], geom: VehicleGeometry) -> None:
+        self.obstacles = obstacles
+        self.geom = geom
+        local = geometry.body_corners(geom)
+        self.centre = local.mean(axis=0)
+        self.r_car = float(np.max(np.hypot(*(local - self.centre).T)))
+        self.oc = np.array([o.mean(axis=0) for o in obstacles]).reshape(-1, 2)
+        self.r_obs = np.array([np.max(np.hypot(*(o - o.mean(axis=0)).T)) for o in obstacles])
+
+    def collides(self, poses: np.ndarray) -> np.ndarray:
+        """(N,) True where the footprint at pose i overlaps an obstacle."""
+        hit = np.zeros(len(poses), dtype=bool)
+        if not self.obstacles or not len(poses):
+            return hit
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        cx = poses[:, 0] + c * self.centre[0] - s * self.centre[1]
+        cy = poses[:, 1] + s * self.centre[0] + c * self.centre[1]
+        gap = np.hypot(cx[:, None] - self.oc[:, 0], cy[:, None] - self.oc[:, 1])
+        near = np.flatnonzero(np.any(gap <= self.r_car + self.r_obs + 1e-6, axis=0))
+        if len(near):
+            fp = geometry.footprints(poses, self.geom)
+            for j in near:
+                hit |= geometry.intersects(fp, self.obstacles[j])
+        return hit
+
+
 def _wrap_deg(a: float) -> float:
     return abs(math.degrees((a + math.pi) % (2.0 * math.pi) - math.pi))
 
@@ -255,7 +285,7 @@ def execute(
     tracker = Tracker(trajectory, cfg.tracker, geom, dt, mpc)
     iface = CommandInterface(interface_cfg, dt)
     integ = PoseIntegrator(scene.start, dt)
-    obstacles = scene.obstacle_arrays()
+    broad = _CollisionCheck(scene.obstacle_arrays(), geom)
     n_max = round(cfg.timeout_s / dt) + 1
     rec = _Recorder(n_max)
     y = plant.reset()
@@ -271,7 +301,7 @@ def execute(
         cmd = iface.step(req, y)
         rec.add(t, pose, y, cmd, req, tracker)
         if k + 1 - checked >= cfg.collision_every or tracker.done:
-            hit = geometry.collides(poses[checked : k + 1], geom, obstacles) if obstacles else []
+            hit = broad.collides(poses[checked : k + 1])
             if np.any(hit):
                 first = checked + int(np.argmax(hit))
                 rec.n = first + 1

@@ -85,16 +85,26 @@ def first_move_gains(lag_m: float, cfg: MpcConfig) -> tuple[np.ndarray, np.ndarr
     return g_x, g_r
 
 
+_TABLES: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def gain_table(cfg: MpcConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(λ grid (L,), g_x (L, 3), g_r (L, N)) for ``cfg``, computed once per process."""
+    key = cfg.digest()
+    if key not in _TABLES:
+        lags = np.geomspace(cfg.lag_min_m, max(cfg.lag_max_m, cfg.lag_min_m * 1.01), cfg.lag_points)
+        gains = [first_move_gains(lag, cfg) for lag in lags]
+        _TABLES[key] = (lags, np.array([g[0] for g in gains]), np.array([g[1] for g in gains]))
+    return _TABLES[key]
+
+
 class PreviewMpc:
     """First-move gains of the preview MPC, tabulated over the lag distance λ."""
 
     def __init__(self, cfg: MpcConfig | None = None) -> None:
         self.cfg = cfg or MpcConfig()
         c = self.cfg
-        self.lags = np.geomspace(c.lag_min_m, max(c.lag_max_m, c.lag_min_m * 1.01), c.lag_points)
-        gains = [first_move_gains(lag, c) for lag in self.lags]
-        self.g_x = np.array([g[0] for g in gains])
-        self.g_r = np.array([g[1] for g in gains])
+        self.lags, self.g_x, self.g_r = gain_table(c)
         self._log_lags = np.log(self.lags)
         self.preview = np.arange(c.horizon) * c.ds_m
 
