@@ -284,6 +284,8 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Execute one planned scene in closed loop; draw Fig. 8 and Fig. 9."""
         plants = _plants(plant if compare is None else f"{plant},{compare}")
+        for k in plants:  # fail fast (one line) if a plant cannot be built here
+            _check_plant(k, _s(config))
         doc = simulate_scene(
             scene,
             plants,

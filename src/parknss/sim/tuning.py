@@ -124,7 +124,8 @@ def write_tuned(
     """Write the full interface config with the tuned gains as YAML (a configs/ drop-in)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    tuned = InterfaceConfig.model_validate({**start.model_dump(), **result.gains})
+    gains = {k: float(f"{v:.6g}") for k, v in result.gains.items()}
+    tuned = InterfaceConfig.model_validate({**start.model_dump(), **gains})
     head = (
         "# Command-interface gains tuned by coordinate descent (parknss tune).\n"
         f"# objective {result.initial_objective:.3f} -> {result.objective:.3f} "
