@@ -1,0 +1,125 @@
+"""Benchmark: one NSS training epoch at paper size, plain eager loop vs the fused path.
+
+    python benchmarks/bench_train.py [--data DIR] [--windows 29] [--length 2121]
+                                     [--repeats 3] [--threads 1]
+
+Paper size (§IV-B): 29 end-aligned windows of 2121 samples of the campaign (default: the
+synthetic default campaign, generated in memory), state net 6x128, output net 3x128,
+tanh, forward Euler, the full loss of eq. 8. One epoch = rollout of all windows +
+readout + output net + loss + backward + Adam step, timed for
+
+* eager: the plain per-step autograd loop (``engine="eager"``: nn.Linear layers on
+  cat([x, u_k]) each step, autograd records every operation), and
+* fused: ``engine="fused"`` (input projections precomputed, TorchScript forward loop into
+  a preallocated buffer, hand-written reverse-time backward, weight gradients as single
+  large matmuls; parknss.nss.fused),
+
+with identical initial weights, data and loss code, in the same run, interleaved epoch by
+epoch, with one intra-op thread. Readout, output network and loss are the same code in
+both (applied to the whole stacked trajectory). Prints the seconds per epoch of each
+(best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
+both (they train identically up to float32 rounding), and last the ratio eager / fused
+of the best times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+from parknss.data.normalize import Normalizer
+from parknss.data.windows import make_windows
+from parknss.nss.batch import Batch, make_batch
+from parknss.nss.config import NSSConfig
+from parknss.nss.model import NORMALIZED
+from parknss.nss.train import build_model, epoch_loss, geometry_of
+
+
+def load_campaign(data: str | None):
+    if data:
+        from parknss.data.io import read_campaign
+
+        return read_campaign(data)
+    from parknss.reference.campaign import generate_campaign
+
+    return generate_campaign(seed=0)
+
+
+def paper_batch(cfg: NSSConfig, campaign, n_windows: int, length: int):
+    norm = Normalizer.fit(
+        list(campaign), NORMALIZED, cfg.data.normalizer, cfg.data.clip_percentiles
+    )
+    w = make_windows(list(campaign), length)
+    if w.n < n_windows:
+        raise SystemExit(f"campaign gives only {w.n} windows of {length}")
+    model = build_model(cfg, norm, geometry_of(campaign))
+    b = make_batch(model, w, cfg.loss.blind_zone_kmh)
+    t = b.targets
+    sel = slice(0, n_windows)
+    for k in t.__dataclass_fields__:
+        setattr(t, k, getattr(t, k)[sel])
+    return norm, Batch(b.x0[sel], b.u[sel], t, b.lengths[sel])
+
+
+class Runner:
+    """A model, its optimizer and one engine: ``epoch()`` runs and times one epoch."""
+
+    def __init__(self, cfg, norm, geom, batch, engine: str) -> None:
+        self.cfg, self.batch, self.engine = cfg, batch, engine
+        self.model = build_model(cfg, norm, geom)
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
+        self.times: list[float] = []
+        self.losses: list[float] = []
+
+    def epoch(self, record: bool = True) -> None:
+        t0 = time.perf_counter()
+        self.opt.zero_grad(set_to_none=True)
+        terms = epoch_loss(self.model, self.batch, self.cfg, engine=self.engine)
+        terms.total.backward()
+        self.opt.step()
+        dt = time.perf_counter() - t0
+        self.losses.append(float(terms.total.detach()))
+        if record:
+            self.times.append(dt)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=None, help="campaign folder (default: generated)")
+    ap.add_argument("--windows", type=int, default=29)
+    ap.add_argument("--length", type=int, default=2121)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=1)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    cfg = NSSConfig()
+    campaign = load_campaign(a.data)
+    norm, batch = paper_batch(cfg, campaign, a.windows, a.length)
+    geom = geometry_of(campaign)
+    m = cfg.model
+    print(
+        f"epoch at paper size: {batch.n} windows x {batch.steps} steps, state net "
+        f"{m.state_layers}x{m.state_units}, output net {m.output_layers}x{m.output_units}, "
+        f"{torch.get_num_threads()} thread(s), torch {torch.__version__}"
+    )
+    runners = {e: Runner(cfg, norm, geom, batch, e) for e in ("eager", "fused")}
+    for r in runners.values():
+        r.epoch(record=False)  # warm-up (TorchScript profiling, buffer allocation)
+    for _ in range(a.repeats):  # interleaved, so both see the same machine load
+        for r in runners.values():
+            r.epoch()
+    best = {}
+    for e, r in runners.items():
+        best[e] = min(r.times)
+        print(
+            f"{e:>5}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
+            f"over {len(r.times)} epochs; losses {', '.join(f'{v:.7f}' for v in r.losses)}"
+        )
+    print(f"speedup eager/fused: {best['eager'] / best['fused']:.2f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""The physics-informed neural state-space (NSS) vehicle model: model, losses, training."""

@@ -1,0 +1,131 @@
+"""Configuration of the NSS model, its losses, data preparation and training (paper §II, §IV-B).
+
+Every default is the paper's; ``configs/nss.yaml`` lists them all. A YAML file overrides
+any subset, section by section (``model``, ``loss``, ``data``, ``train``, ``limiter``).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.signals import BLIND_ZONE_KMH, DT
+
+DEFAULT_YAML = CONFIG_DIR / "nss.yaml"
+
+
+class ModelConfig(StrictModel):
+    """Architecture (§II): state net f on [x̂, u] -> dx/dt, output net g -> [ax, ay]."""
+
+    state_layers: int = Field(6, ge=1, description="hidden layers of the state network")
+    state_units: int = Field(128, ge=1, description="units per hidden layer of the state net")
+    output_layers: int = Field(3, ge=1, description="hidden layers of the output network")
+    output_units: int = Field(128, ge=1, description="units per hidden layer of the output net")
+    activation: Literal["tanh"] = "tanh"
+    integrator: Literal["euler", "midpoint", "rk4"] = "euler"
+    residual_yaw: bool = Field(
+        True, description="state [vx, ω_res], yaw read out as ω_ref + ω_res (False: direct yaw)"
+    )
+    dt: float = Field(DT, gt=0.0, description="integration step, s (the log's sample interval)")
+    engine: Literal["auto", "fused", "eager"] = Field(
+        "auto",
+        description="recurrence engine: fused (whole-rollout autograd.Function, Euler only), "
+        "eager (plain per-step autograd loop), auto (fused when possible)",
+    )
+
+
+class LossConfig(StrictModel):
+    """Training objective (eq. 8): masked state loss + output loss + λ·physics terms."""
+
+    kind: Literal["mae", "mse", "logcosh"] = "mae"
+    lambda_vx: float = Field(0.1, ge=0.0, description="weight of the gear-conditioned vx loss")
+    lambda_yaw: float = Field(0.5, ge=0.0, description="weight of the yaw-prior loss")
+    blind_zone_kmh: float = Field(
+        BLIND_ZONE_KMH, ge=0.0, description="|vx| below this is masked in the state loss"
+    )
+
+
+class DataConfig(StrictModel):
+    """Normalisation and training windows (§II, §IV-B)."""
+
+    normalizer: Literal["clipped", "minmax", "zscore"] = "clipped"
+    clip_percentiles: tuple[float, float] = (0.5, 99.5)
+    window: Literal["shortest"] | int = Field(
+        "shortest", description="training-window length: the shortest training trial, or N"
+    )
+
+    @field_validator("clip_percentiles")
+    @classmethod
+    def _pct(cls, v: tuple[float, float]) -> tuple[float, float]:
+        if not 0.0 <= v[0] < v[1] <= 100.0:
+            raise ValueError("clip_percentiles must satisfy 0 <= lo < hi <= 100")
+        return v
+
+    @field_validator("window")
+    @classmethod
+    def _window(cls, v):
+        if isinstance(v, int) and v < 2:
+            raise ValueError("window must be 'shortest' or an integer >= 2")
+        return v
+
+
+class TrainConfig(StrictModel):
+    """Optimisation (§IV-B): Adam, cosine LR from 2e-3, cap 3200 epochs, best checkpoint."""
+
+    epochs: int = Field(3200, ge=1)
+    lr: float = Field(2.0e-3, gt=0.0)
+    lr_min: float = Field(0.0, ge=0.0, description="final LR of the cosine schedule")
+    schedule: Literal["cosine", "constant"] = "cosine"
+    seed: int = 0
+    threads: int = Field(1, ge=1, description="torch intra-op threads during training")
+    val_every: int = Field(5, ge=1, description="validate every N epochs")
+    smooth_window: int = Field(
+        20, ge=1, description="trailing moving average over this many criterion points"
+    )
+    checkpoint_every: int = Field(50, ge=1, description="save the resumable state every N")
+    dtype: Literal["float32", "float64"] = "float32"
+
+
+class LimiterConfig(StrictModel):
+    """Inference-time gear-conditioned kinematic limiter (§V-B); off by default."""
+
+    enabled: bool = False
+    mode: Literal["reconstructed", "residual"] = Field(
+        "reconstructed",
+        description="clamp the reconstructed yaw rate (correct) or the residual channel",
+    )
+    yaw_margin: float = Field(
+        0.1, ge=0.0, description="relative margin on the kinematic yaw envelope |vx|/R_min"
+    )
+    yaw_tol_degs: float = Field(1.0, ge=0.0, description="absolute yaw envelope floor, deg/s")
+
+
+class NSSConfig(StrictModel):
+    """Everything that defines one NSS fit."""
+
+    model: ModelConfig = ModelConfig()
+    loss: LossConfig = LossConfig()
+    data: DataConfig = DataConfig()
+    train: TrainConfig = TrainConfig()
+    limiter: LimiterConfig = LimiterConfig()
+
+    @model_validator(mode="after")
+    def _fused_needs_euler(self) -> NSSConfig:
+        if self.model.engine == "fused" and self.model.integrator != "euler":
+            raise ValueError("engine 'fused' implements forward Euler only; use 'auto'/'eager'")
+        return self
+
+
+def load_nss_config(path=None, **sections) -> NSSConfig:
+    """Read an NSSConfig from YAML (defaults when None) plus per-section overrides."""
+    return load_config(NSSConfig, path, **sections)
+
+
+def with_overrides(cfg: NSSConfig, **sections: dict) -> NSSConfig:
+    """A copy of ``cfg`` with fields of sections replaced, e.g. train={"epochs": 30}."""
+    doc = cfg.model_dump(mode="json")
+    for sec, vals in sections.items():
+        doc[sec] = {**doc[sec], **vals}
+    return NSSConfig.model_validate(doc)

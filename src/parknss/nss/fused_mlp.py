@@ -1,0 +1,73 @@
+"""A tanh MLP over a large stack of samples with a hand-written backward.
+
+The output network is not part of the recurrence, so it is applied once to the whole
+stacked trajectory (all windows x all steps, ~60 000 rows at paper size). Its arithmetic
+is a handful of large matmuls; under autograd each epoch also allocates a dozen fresh
+31 MB activation and gradient tensors, and faulting those pages in costs more than the
+arithmetic. This Function computes the same layers into recycled buffers
+(:mod:`parknss.nss.workspace`) and backpropagates by hand: δ_L = g·W_out ⊙ (1 - h_L²),
+δ_{i} = δ_{i+1}·W_{i+1} ⊙ (1 - h_i²), weight gradients δᵀ·h.
+
+apply(x (N, n_in), W0, b0, W1, b1, ..., W_out, b_out) -> y (N, n_out). Checked against
+autograd by gradcheck in float64 (tests/test_nss_fused.py).
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import torch
+
+from parknss.nss.workspace import WORKSPACE
+
+
+class FusedTanhMLP(torch.autograd.Function):
+    """y = W_out·tanh(... tanh(W0·x + b0) ...) + b_out, activations in recycled buffers."""
+
+    @staticmethod
+    def forward(ctx, x, *params):
+        Ws, bs = list(params[0::2]), list(params[1::2])
+        N = x.shape[0]
+        hs = []
+        h = x
+        for W, b in zip(Ws[:-1], bs[:-1], strict=True):
+            buf = WORKSPACE.take((N, W.shape[0]), x.dtype)
+            torch.addmm(b, h, W.t(), out=buf)
+            buf.tanh_()
+            hs.append(buf)
+            h = buf
+        y = torch.addmm(bs[-1], h, Ws[-1].t())
+        ctx.hs = hs
+        for buf in hs:
+            weakref.finalize(ctx, WORKSPACE.give, buf)
+        ctx.save_for_backward(x, *Ws)
+        return y
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g):
+        x, *Ws = ctx.saved_tensors
+        hs = ctx.hs
+        g = g.contiguous()
+        grads_W: list = [None] * len(Ws)
+        grads_b: list = [None] * len(Ws)
+        grads_W[-1] = g.t().mm(hs[-1])
+        grads_b[-1] = g.sum(0)
+        bufs = [WORKSPACE.take(tuple(h.shape), h.dtype) for h in hs[:2]]
+        d_next = g
+        W_next = Ws[-1]
+        for i in range(len(hs) - 1, -1, -1):
+            d = bufs[i % len(bufs)]
+            torch.mm(d_next, W_next, out=d)
+            torch.ops.aten.tanh_backward(d, hs[i], grad_input=d)
+            h_in = hs[i - 1] if i > 0 else x
+            grads_W[i] = d.t().mm(h_in)
+            grads_b[i] = d.sum(0)
+            d_next, W_next = d, Ws[i]
+        gx = d_next.mm(W_next) if ctx.needs_input_grad[0] else None
+        for b in bufs:
+            WORKSPACE.give(b)
+        out = [gx]
+        for gw, gb in zip(grads_W, grads_b, strict=True):
+            out += [gw, gb]
+        return tuple(out)
