@@ -24,7 +24,16 @@ app = typer.Typer(
 )
 
 # Modules in parknss.commands, each with register(app).
-COMMAND_MODULES: tuple[str, ...] = ("campaign", "demo", "reproduce", "plan", "rate", "simulate")
+COMMAND_MODULES: tuple[str, ...] = (
+    "campaign",
+    "demo",
+    "reproduce",
+    "plan",
+    "rate",
+    "simulate",
+    "web",
+    "nss",
+)
 
 for _name in COMMAND_MODULES:
     importlib.import_module(f"parknss.commands.{_name}").register(app)

@@ -1,0 +1,166 @@
+"""One cross-validation fold as an executor job: fit on its training trials, score held out.
+
+:func:`fold_job` is the unit every NSS study is made of (Table II, the learning curve, the
+seed-noise floor, the ablations, the limiter study): it loads the campaign, builds the
+split (``split="cv"``: the stratified k-fold of :func:`~parknss.data.splits.stratified_folds`;
+``split="leave"``: the leave-r-repeats-out grid), fits the model named by ``model`` and
+rolls it out open loop over every held-out trial's whole length. Its arguments and its
+result are plain JSON, so the same job runs in-process, on the local pool or on Ray and is
+cached by the executor under the hash of its arguments.
+
+Models: ``"nss"`` (the NSS with the given config overrides), ``"linear"`` (the
+least-squares linear state-space baseline of :mod:`parknss.nss.linear`). The direct-yaw
+NSS is ``"nss"`` with ``{"model": {"residual_yaw": false}}``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from parknss.data.splits import Fold, leave_r_out, stratified_folds
+from parknss.data.trial import Campaign
+from parknss.errors import ConfigError
+from parknss.metrics.errors import open_loop_errors
+from parknss.nss.campaigns import load_campaign
+from parknss.nss.config import NSSConfig, load_nss_config, with_overrides
+
+MODELS: tuple[str, ...] = ("nss", "linear")
+
+
+@dataclass
+class FoldResult:
+    """What one fold reports (JSON-ready).
+
+    errors: :class:`~parknss.metrics.errors.OpenLoopErrors` as JSON against the logged
+    channels; truth_errors: the same against the noise-free truth channels when the
+    campaign has them (synthetic), else None. NSS only: best_epoch, epochs, the history
+    of the validation criterion (epochs, raw and smoothed moving-region state loss, and
+    the output loss at the same epochs) and the window length.
+    """
+
+    split: str
+    index: int
+    model: str
+    train: list[str]
+    val: list[str]
+    errors: dict
+    truth_errors: dict | None
+    wall_s: float
+    best_epoch: int | None = None
+    epochs: int | None = None
+    window_length: int | None = None
+    n_windows: int | None = None
+    history: dict | None = None
+    model_dir: str | None = None
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+def make_fold(
+    campaign: Campaign, split: str, index: int, r: int = 1, seed: int | None = None
+) -> Fold:
+    """The fold ``index`` of the split ("cv" or "leave" with r held-out repeats per class)."""
+    if split == "cv":
+        folds = stratified_folds(campaign, seed)
+    elif split == "leave":
+        folds = leave_r_out(campaign, r, seed)
+    else:
+        raise ConfigError(f"split must be 'cv' or 'leave', got {split!r}")
+    if not 0 <= index < len(folds):
+        raise ConfigError(f"fold index {index} out of range 0..{len(folds) - 1}")
+    return folds[index]
+
+
+def fold_config(config: str | None, overrides: dict | None) -> NSSConfig:
+    """The NSS config: a YAML file (or the paper defaults) with per-section overrides."""
+    cfg = load_nss_config(config)
+    return with_overrides(cfg, **(overrides or {}))
+
+
+def _evaluate(predictions: dict, trials: list, horizon: int | None) -> tuple[dict, dict | None]:
+    logged = open_loop_errors(predictions, trials, horizon).to_json()
+    has_truth = all(tr.has_truth() for tr in trials)
+    truth = open_loop_errors(predictions, trials, horizon, "truth").to_json() if has_truth else None
+    return logged, truth
+
+
+def fold_job(
+    split: str = "cv",
+    index: int = 0,
+    r: int = 1,
+    model: str = "nss",
+    data: str | None = None,
+    config: str | None = None,
+    overrides: dict | None = None,
+    split_seed: int | None = None,
+    save_dir: str | None = None,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Fit one fold and score its held-out trials; returns :class:`FoldResult` as JSON.
+
+    Args:
+        split, index, r, split_seed: which fold (see :func:`make_fold`).
+        model: "nss" or "linear".
+        data: campaign folder (None: the default campaign).
+        config, overrides: NSS config YAML and section overrides, e.g.
+            ``{"train": {"epochs": 300, "seed": 1}, "model": {"residual_yaw": False}}``.
+        save_dir: if given, the fitted NSS is saved there (model.safetensors + model.json).
+    """
+    if model not in MODELS:
+        raise ConfigError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    campaign = load_campaign(data)
+    fold = make_fold(campaign, split, index, r, split_seed)
+    train = [campaign[i] for i in fold.train]
+    val = [campaign[i] for i in fold.val]
+    t0 = time.perf_counter()
+    if model == "linear":
+        from parknss.nss.linear import LinearSSM
+
+        lin = LinearSSM.fit(train)
+        logged, truth = _evaluate(lin.predict_trials(val), val, None)
+        return FoldResult(
+            fold.name,
+            index,
+            model,
+            list(fold.train),
+            list(fold.val),
+            logged,
+            truth,
+            time.perf_counter() - t0,
+        ).to_json()
+    from parknss.nss.checkpoint import save_model
+    from parknss.nss.predict import predict_trials
+    from parknss.nss.train import fit, geometry_of
+
+    cfg = fold_config(config, overrides)
+    res = fit(train, val, cfg, geometry_of(campaign), progress=progress)
+    logged, truth = _evaluate(predict_trials(res.model, val), val, res.window_length)
+    h = res.history
+    saved = None
+    if save_dir is not None:
+        saved = str(save_model(Path(save_dir), res.model, cfg, res.training_meta()))
+    return FoldResult(
+        fold.name,
+        index,
+        model,
+        list(fold.train),
+        list(fold.val),
+        logged,
+        truth,
+        res.wall_s,
+        best_epoch=res.best_epoch,
+        epochs=res.epochs_run,
+        window_length=res.window_length,
+        n_windows=res.n_windows,
+        history={
+            "epochs": h.crit_epochs,
+            "raw": h.crit_raw,
+            "smooth": h.crit_smooth,
+            "output": [row.get("val_output") for row in h.rows if "val_output" in row],
+        },
+        model_dir=saved,
+    ).to_json()
