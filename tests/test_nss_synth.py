@@ -83,3 +83,30 @@ def test_trial_direction_follows_gear():
 def test_campaign_shape():
     c = make_campaign(120, reps=4)
     assert len(c) == 16 and [len(v) for v in c.by_class().values()] == [4, 4, 4, 4]
+
+
+TINY = {"state_units": 8, "state_layers": 2, "output_units": 8, "output_layers": 1}
+
+
+def tiny_config(dtype: str = "float64", **sections):
+    """An NSSConfig with tiny networks (sections override as in ``with_overrides``)."""
+    from parknss.nss.config import NSSConfig, with_overrides
+
+    model = {**TINY, **sections.pop("model", {})}
+    train = {"dtype": dtype, **sections.pop("train", {})}
+    return with_overrides(NSSConfig(), model=model, train=train, **sections)
+
+
+def tiny_model(campaign: Campaign | None = None, seed: int = 0, dtype: str = "float64", **sec):
+    """A freshly initialised tiny NSSModel with a normalizer fitted on ``campaign``."""
+    from parknss.data.normalize import Normalizer
+    from parknss.nss.model import NORMALIZED
+    from parknss.nss.train import build_model
+
+    campaign = campaign or make_campaign(150, reps=1)
+    sec.setdefault("train", {})["seed"] = seed
+    cfg = tiny_config(dtype, **sec)
+    norm = Normalizer.fit(
+        list(campaign), NORMALIZED, cfg.data.normalizer, cfg.data.clip_percentiles
+    )
+    return build_model(cfg, norm, VehicleGeometry()), cfg

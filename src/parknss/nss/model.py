@@ -206,7 +206,9 @@ class NSSModel(nn.Module):
         U = u_s[:, :-1].transpose(0, 1).contiguous()
         hidden = [t for m in lin[1:-1] for t in (m.weight, m.bias)]
         args = (x0_s, U, lin[0].weight, lin[0].bias, lin[-1].weight, lin[-1].bias)
-        if torch.is_grad_enabled() and any(p.requires_grad for p in self.state_net.parameters()):
+        needs_grad = x0_s.requires_grad or U.requires_grad
+        needs_grad = needs_grad or any(p.requires_grad for p in self.state_net.parameters())
+        if torch.is_grad_enabled() and needs_grad:
             X = FusedEulerRollout.apply(self.dt, *args, *hidden)
         else:
             X = euler_forward(*args, hidden[0::2], hidden[1::2], dt=self.dt)
