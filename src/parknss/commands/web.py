@@ -1,0 +1,53 @@
+"""``parknss web``: serve the interactive closed-loop simulator in the browser.
+
+Starts the FastAPI app of :mod:`parknss.web.app` with uvicorn on ``--host``/``--port``
+(defaults from configs/web.yaml) and, with ``--open``, opens the page in the default
+browser once the server is up. Stop it with Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import threading
+import webbrowser
+from pathlib import Path
+
+import typer
+
+
+def _log(msg: str) -> None:
+    typer.echo(f"[web] {msg}", err=True)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("web")
+    def web(
+        host: str | None = typer.Option(None, "--host", help="Bind address (web.yaml: 127.0.0.1)."),
+        port: int | None = typer.Option(None, "--port", help="TCP port (web.yaml: 8000)."),
+        open_browser: bool = typer.Option(
+            True, "--open/--no-open", help="Open the page in the default browser."
+        ),
+        config: Path | None = typer.Option(None, "--config", help="Web YAML (configs/web.yaml)."),
+    ) -> None:
+        """Serve the interactive parking simulator (plan, run, play back) in the browser."""
+        import uvicorn
+
+        from parknss.web.app import create_app
+        from parknss.web.config import load_web_config
+
+        overrides = {k: v for k, v in (("host", host), ("port", port)) if v is not None}
+        cfg = load_web_config(config, **overrides)
+        url = f"http://{cfg.host}:{cfg.port}/"
+        server = uvicorn.Server(
+            uvicorn.Config(create_app(cfg), host=cfg.host, port=cfg.port, log_level="warning")
+        )
+        if open_browser:
+
+            def _open_when_up() -> None:
+                while not server.started and not server.should_exit:
+                    threading.Event().wait(0.1)
+                if server.started:
+                    webbrowser.open(url)
+
+            threading.Thread(target=_open_when_up, daemon=True).start()
+        _log(f"serving the simulator at {url} (Ctrl-C stops it)")
+        server.run()

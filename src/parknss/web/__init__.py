@@ -1,0 +1,1 @@
+"""The interactive browser view of the closed-loop parking simulator (``parknss web``)."""

@@ -1,0 +1,49 @@
+"""Settings of the interactive simulator (configs/web.yaml).
+
+Budgets are wall-clock seconds of the server; the simulated-time limit of a run stays the
+closed-loop config's ``timeout_s`` so the browser and ``parknss simulate`` drive the same
+loop. Paths of the other configs default (null) to the files ``parknss simulate`` reads.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+
+from parknss.config import CONFIG_DIR, StrictModel, load_config
+
+
+class WebConfig(StrictModel):
+    """Server, budgets, payload sizes and colours of the browser view."""
+
+    host: str = Field("127.0.0.1", description="address the server binds to")
+    port: int = Field(8000, ge=1, le=65535, description="TCP port")
+    workers: int = Field(1, ge=1, description="concurrent plan/simulate computations")
+    max_pending: int = Field(4, ge=1, description="computations queued or running before 503")
+    plan_budget_s: float = Field(30.0, gt=0, description="wall-clock budget of a plan, s")
+    simulate_budget_s: float = Field(120.0, gt=0, description="wall-clock budget of a run, s")
+    plan_cache_size: int = Field(32, ge=1, description="plans kept, keyed by scene")
+    series_rate_hz: float = Field(25.0, gt=0, le=100, description="series rate sent, Hz")
+    max_series_points: int = Field(4000, ge=10, description="max samples sent per run")
+    path_step_m: float = Field(0.05, gt=0, description="planned-path pose spacing sent, m")
+    footprint_step_m: float = Field(1.0, gt=0, description="planned footprints every, m")
+    closed_loop_config: str | None = Field(None, description="closed-loop YAML")
+    interface_config: str | None = Field(None, description="interface gains YAML")
+    planning_config: str | None = Field(None, description="planning YAML")
+    scenarios_config: str | None = Field(None, description="scenarios YAML")
+    plant_colours: dict[str, str] = Field(
+        default_factory=lambda: {
+            "kinematic": "#00bcd4",
+            "chain": "#e67e22",
+            "reference": "#8e44ad",
+        },
+        description="driven path and car colour per plant",
+    )
+    planned_colour: str = Field("#27ae60", description="planned path colour")
+
+
+def load_web_config(path: str | Path | None = None, **overrides) -> WebConfig:
+    """Read configs/web.yaml (or ``path``) plus ``overrides``; defaults without a file."""
+    p = Path(path) if path is not None else CONFIG_DIR / "web.yaml"
+    return load_config(WebConfig, p if (path is not None or p.is_file()) else None, **overrides)
