@@ -121,8 +121,9 @@ def _meta_path(path: str | Path) -> Path:
 
 
 def _check_header(meta: dict, src: Path) -> None:
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise CheckpointError(f"{src}: not a parknss NSS model (format {meta.get('format')!r})")
+    fmt = meta.get("format") if isinstance(meta, dict) else None
+    if fmt != FORMAT:
+        raise CheckpointError(f"{src}: not a parknss NSS model (format {fmt!r})")
     if meta.get("format_version") != FORMAT_VERSION:
         raise CheckpointError(
             f"{src}: model format version {meta.get('format_version')!r}, "
