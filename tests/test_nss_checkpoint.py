@@ -159,3 +159,19 @@ def test_malformed_normalizer(saved):
     folder, _, _ = saved
     _edit(folder, lambda d: d["normalizer"]["channels"]["vx"].__setitem__("scale", 0.0))
     _refused(folder, "normalizer is malformed")
+
+
+@pytest.mark.parametrize("geometry", ["EXEED", [3.0], {"wheelbase": "long"}])
+def test_invalid_geometry(saved, geometry):
+    folder, _, _ = saved
+    _edit(folder, lambda d: d.__setitem__("geometry", geometry))
+    _refused(folder, "invalid vehicle geometry")
+
+
+def test_float32_round_trip(tmp_path):
+    m, cfg = tiny_model(CAMP, seed=2, dtype="float32")
+    save_model(tmp_path, m, cfg)
+    lm = load_model(tmp_path)
+    assert lm.model.dtype == torch.float32 and lm.model.in_sc.dtype == torch.float32
+    a, b = predict_trials(m, CAMP), predict_trials(lm.model, CAMP)
+    assert all(np.array_equal(a[t][c], b[t][c]) for t in a for c in a[t])

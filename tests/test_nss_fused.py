@@ -119,6 +119,20 @@ def test_fused_equals_eager_outputs_and_gradients(residual_yaw):
     torch.testing.assert_close(guf, gue, rtol=1e-10, atol=1e-10)
 
 
+def test_fused_equals_eager_in_float32():
+    """The training dtype: same numbers up to float32 rounding."""
+    camp = make_campaign(120, reps=1)
+    m, _ = tiny_model(camp, seed=3, dtype="float32")
+    w = whole_trials(list(camp))
+    x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
+    rf, gf, _ = _grads(m, x0, u, "fused")
+    re, ge, _ = _grads(m, x0, u, "eager")
+    assert rf.vx.dtype == torch.float32
+    torch.testing.assert_close(rf.state_s, re.state_s, rtol=0, atol=1e-5)
+    for n in gf:
+        torch.testing.assert_close(gf[n], ge[n], rtol=0, atol=1e-5 * float(ge[n].abs().max()))
+
+
 def test_fused_input_gradient_with_frozen_weights():
     """Gradients w.r.t. the inputs flow through the fused rollout of a frozen model."""
     m, x0, u = _case()

@@ -202,7 +202,7 @@ def load_model(path: str | Path) -> LoadedModel:
     _check_normalizer(norm, cfg, src)
     try:
         geom = VehicleGeometry.from_dict(meta.get("geometry") or {})
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, AttributeError) as exc:  # AttributeError: not an object
         raise CheckpointError(f"{src}: invalid vehicle geometry ({exc})") from exc
     tensors = _load_weights(meta, src)
     model = NSSModel(cfg.model, norm, geom)
