@@ -175,3 +175,15 @@ def test_float32_round_trip(tmp_path):
     assert lm.model.dtype == torch.float32 and lm.model.in_sc.dtype == torch.float32
     a, b = predict_trials(m, CAMP), predict_trials(lm.model, CAMP)
     assert all(np.array_equal(a[t][c], b[t][c]) for t in a for c in a[t])
+
+
+def test_batched_prediction_equals_one_trial_at_a_time():
+    """Padding to the longest trial does not leak into the shorter ones."""
+    m, _ = tiny_model(CAMP, seed=5)
+    both = predict_trials(m, CAMP)
+    for tr in CAMP:
+        one = predict_trials(m, [tr])[tr.id]
+        for ch in ("vx", "yaw_rate", "ax", "ay"):
+            np.testing.assert_allclose(both[tr.id][ch], one[ch], rtol=0, atol=1e-12)
+        assert both[tr.id]["vx"][0] == pytest.approx(tr["vx"][0], abs=1e-12)
+    assert predict_trials(m, []) == {}
