@@ -28,6 +28,9 @@ class WebConfig(StrictModel):
     max_series_points: int = Field(4000, ge=10, description="max samples sent per run")
     path_step_m: float = Field(0.05, gt=0, description="planned-path pose spacing sent, m")
     footprint_step_m: float = Field(1.0, gt=0, description="planned footprints every, m")
+    accel_smoothing_s: float = Field(
+        0.2, ge=0, description="moving-average window of the smoothed ax/ay view, s"
+    )
     closed_loop_config: str | None = Field(None, description="closed-loop YAML")
     interface_config: str | None = Field(None, description="interface gains YAML")
     planning_config: str | None = Field(None, description="planning YAML")

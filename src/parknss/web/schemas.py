@@ -76,6 +76,7 @@ class Health(BaseModel):
     vehicle: VehicleInfo
     grids: dict[str, int]
     planned_colour: str
+    accel_smoothing_s: float = Field(description="window of the page's smoothed ax/ay, s")
 
 
 class CellInfo(BaseModel):

@@ -131,6 +131,7 @@ class SimulatorService:
             vehicle=self.vehicle(),
             grids=dict(GRID_SIZES),
             planned_colour=self.cfg.planned_colour,
+            accel_smoothing_s=self.cfg.accel_smoothing_s,
         )
 
     def grid_scene(self, grid: str, index: int) -> sc.Scene:
@@ -265,7 +266,10 @@ class SimulatorService:
                 seed=cfg.plant_seed,
             )
         except ParknssError as exc:
-            raise PlantUnavailableError(str(exc)) from exc
+            msg = str(exc)
+            if not msg.startswith(f"{kind} plant"):
+                msg = f"{kind} plant unavailable: {msg}"
+            raise PlantUnavailableError(msg) from exc
 
     def simulate(self, req: SimulateRequest) -> SimulateResponse:
         """Plan (or reuse the plan of) the scene and drive it through ``req.plant``."""

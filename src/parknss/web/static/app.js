@@ -10,12 +10,18 @@ const HANDLE_AHEAD_M = 0.9; // rotation handle ahead of the front bumper, m
 const HANDLE_RADIUS_PX = 8;
 
 const PLOTS = {
-  vx: { label: "vx [km/h]", scale: KMH_PER_MS, command: "speed_req" },
+  vx: { label: "vx [km/h] · dashed: speed request", scale: KMH_PER_MS, command: "speed_req" },
   yaw_rate: { label: "yaw rate [°/s]", scale: DEG_PER_RAD },
-  ax: { label: "ax [m/s²]", scale: 1 },
-  ay: { label: "ay [m/s²]", scale: 1 },
-  steer: { label: "steering-wheel angle [°]", scale: 1, command: "steer_cmd" },
-  gear: { label: "gear", scale: 1, step: true, ticks: [[-1, "R"], [0, "P/N"], [1, "D"]] },
+  ax: { label: "ax [m/s²]", scale: 1, smooth: true },
+  ay: { label: "ay [m/s²]", scale: 1, smooth: true },
+  steer: { label: "steering-wheel angle [°] · dashed: command", scale: 1, command: "steer_cmd" },
+  gear: {
+    label: "gear · dashed: command",
+    scale: 1,
+    step: true,
+    command: "gear_cmd",
+    ticks: [[-1, "R"], [0, "P/N"], [1, "D"]],
+  },
 };
 
 const state = {
@@ -33,6 +39,7 @@ const state = {
   tmax: 0,
   playing: false,
   speed: 1,
+  smooth: false, // show ax, ay through a moving average
   drag: null,
   token: 0, // newest request; older answers are dropped
   view: null, // world -> canvas transform
@@ -107,6 +114,7 @@ async function loadHealth() {
     const h = state.health;
     const ready = h.plants.filter((p) => p.available).map((p) => p.kind);
     $("server-status").textContent = `parknss ${h.version} · plants ready: ${ready.join(", ")}`;
+    $("smooth-label").textContent = `smooth ax, ay (${h.accel_smoothing_s} s)`;
     renderPlants();
   } catch (err) {
     $("server-status").textContent = "server unreachable";
@@ -198,6 +206,8 @@ async function plan() {
   clearError();
   const tok = ++state.token;
   setBusy("planning…");
+  state.planning = true;
+  renderPlanInfo();
   try {
     const doc = await api("/api/plan", sceneRequest());
     if (tok !== state.token) return;
@@ -208,7 +218,10 @@ async function plan() {
     state.plan = null;
     showError(err.message);
   } finally {
-    if (tok === state.token) setBusy("");
+    if (tok === state.token) {
+      setBusy("");
+      state.planning = false;
+    }
   }
   renderPlanInfo();
   render();
@@ -315,7 +328,8 @@ function renderPlanInfo() {
   const dl = $("plan-info");
   dl.textContent = "";
   const p = state.plan;
-  const rows = !p ? [["status", state.scene ? "not planned" : "–"]] : [
+  const idle = state.scene ? "not planned" : "–";
+  const rows = !p ? [["status", state.planning ? "planning…" : idle]] : [
     ["scene", p.name],
     ["status", p.plannable ? "planned" : `no plan: ${p.reason}`],
     ["path", p.plannable ? `${fmt(p.length_m, 2)} m, ${p.cusps} cusp${p.cusps === 1 ? "" : "s"}` : "–"],
@@ -797,7 +811,7 @@ function renderPlots() {
     let hi = spec.ticks ? 1.3 : 0;
     if (!spec.ticks) {
       for (const run of state.runs) {
-        for (const v of run.series[canvas.dataset.channel]) {
+        for (const v of channelValues(run, canvas.dataset.channel, spec)) {
           if (v === null) continue;
           lo = Math.min(lo, v * spec.scale);
           hi = Math.max(hi, v * spec.scale);
@@ -828,13 +842,15 @@ function renderPlots() {
       ctx.fillText(text, 4, Y(v) + 4);
     }
     const tst = niceStep(tmax, 6);
+    ctx.textAlign = "center";
     for (let t = 0; t <= tmax + 1e-9; t += tst) {
       ctx.beginPath();
       ctx.moveTo(X(t), f.top);
       ctx.lineTo(X(t), f.bottom);
       ctx.stroke();
-      ctx.fillText(`${formatTick(t, tst)}`, X(t) - 6, f.h - 5);
+      ctx.fillText(`${formatTick(t, tst)}`, Math.min(X(t), f.w - 10), f.h - 5);
     }
+    ctx.textAlign = "left";
     ctx.textAlign = "right";
     ctx.fillText("t [s]", f.right, 13);
     ctx.textAlign = "left";
@@ -846,9 +862,11 @@ function renderPlots() {
     }
     for (const run of state.runs) {
       if (spec.command) {
-        drawLine(ctx, run.series, spec.command, spec, X, Y, run.colour, [4, 3], 1, 0.7);
+        const cmd = run.series[spec.command];
+        drawLine(ctx, run.series.t, cmd, spec, X, Y, run.colour, [4, 3], 1, 0.7);
       }
-      drawLine(ctx, run.series, canvas.dataset.channel, spec, X, Y, run.colour, [], 1.6, 1);
+      const values = channelValues(run, canvas.dataset.channel, spec);
+      drawLine(ctx, run.series.t, values, spec, X, Y, run.colour, [], 1.6, 1);
     }
     canvas._plot = { f, X, Y };
     const copy = canvas._cache || document.createElement("canvas");
@@ -865,7 +883,26 @@ function formatTick(v, step) {
   return Number(v).toFixed(digits);
 }
 
-function drawLine(ctx, s, name, spec, X, Y, colour, dash, width, alpha) {
+// A channel of a run, through the centred moving average when smoothing is on.
+function channelValues(run, name, spec) {
+  const raw = run.series[name];
+  if (!spec.smooth || !state.smooth) return raw;
+  run.smoothed = run.smoothed || {};
+  if (!run.smoothed[name]) {
+    const half = Math.max(0, Math.round((state.health.accel_smoothing_s * run.series.rate_hz) / 2));
+    run.smoothed[name] = raw.map((_, i) => {
+      let sum = 0;
+      let n = 0;
+      for (let j = Math.max(0, i - half); j <= Math.min(raw.length - 1, i + half); j++) {
+        if (raw[j] !== null) { sum += raw[j]; n++; }
+      }
+      return n ? sum / n : null;
+    });
+  }
+  return run.smoothed[name];
+}
+
+function drawLine(ctx, ts, vals, spec, X, Y, colour, dash, width, alpha) {
   ctx.save();
   ctx.strokeStyle = colour;
   ctx.setLineDash(dash);
@@ -874,10 +911,10 @@ function drawLine(ctx, s, name, spec, X, Y, colour, dash, width, alpha) {
   ctx.beginPath();
   let pen = false;
   let prev = null;
-  for (let i = 0; i < s.t.length; i++) {
-    const v = s[name][i];
+  for (let i = 0; i < ts.length; i++) {
+    const v = vals[i];
     if (v === null) { pen = false; continue; }
-    const px = X(s.t[i]);
+    const px = X(ts[i]);
     const py = Y(v * spec.scale);
     if (!pen) ctx.moveTo(px, py);
     else if (spec.step) ctx.lineTo(px, Y(prev * spec.scale));
@@ -988,6 +1025,10 @@ function wire() {
   $("run-btn").addEventListener("click", runSelected);
   $("play").addEventListener("click", togglePlay);
   $("speed").addEventListener("change", (ev) => { state.speed = Number(ev.target.value); });
+  $("smooth").addEventListener("change", (ev) => {
+    state.smooth = ev.target.checked;
+    renderPlots();
+  });
   $("scrub").addEventListener("input", (ev) => {
     state.playing = false;
     state.t = (Number(ev.target.value) / 1000) * state.tmax;
