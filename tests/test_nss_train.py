@@ -21,9 +21,9 @@ TRAIN = [tr for tr in CAMP if tr.repetition == 1]
 VAL = [tr for tr in CAMP if tr.repetition == 2][:2]
 
 
-def _cfg(epochs=10, seed=0, **train):
+def _cfg(epochs=10, seed=0, dtype="float64", **train):
     return tiny_config(
-        "float64",
+        dtype,
         train={"epochs": epochs, "seed": seed, "val_every": 2, "smooth_window": 3, **train},
     )
 
@@ -50,25 +50,27 @@ class _KilledError(Exception):
     pass
 
 
-def test_killed_and_resumed_fit_is_bit_identical(tmp_path):
-    cfg = _cfg(12, seed=3, checkpoint_every=4)
-    ref = _fit(cfg)
+@pytest.mark.parametrize(("dtype", "val"), [("float64", VAL), ("float32", ())])
+def test_killed_and_resumed_fit_is_bit_identical(tmp_path, dtype, val):
+    """Validated fit in float64, and the deployment shape: float32, no validation set."""
+    cfg = _cfg(12, seed=3, checkpoint_every=4, dtype=dtype)
+    ref = _fit(cfg, val=val)
 
     def killer(e):
         if e == 7:
             raise _KilledError
 
     with pytest.raises(_KilledError):
-        _fit(cfg, out_dir=tmp_path, on_epoch=killer)
+        _fit(cfg, val=val, out_dir=tmp_path, on_epoch=killer)
     assert train_state.exists(tmp_path)
     seen = []
-    res = _fit(cfg, out_dir=tmp_path, resume=True, on_epoch=seen.append)
+    res = _fit(cfg, val=val, out_dir=tmp_path, resume=True, on_epoch=seen.append)
     assert seen == [5, 6, 7, 8, 9, 10, 11, 12]  # continued after the epoch-4 state
     assert _same_weights(res.model, ref.model)
     assert (res.best_epoch, res.best_value) == (ref.best_epoch, ref.best_value)
     assert res.history.to_json() == ref.history.to_json()
     # a finished state resumes to the same result without training again
-    again = _fit(cfg, out_dir=tmp_path, resume=True, on_epoch=seen.append)
+    again = _fit(cfg, val=val, out_dir=tmp_path, resume=True, on_epoch=seen.append)
     assert len(seen) == 8 and _same_weights(again.model, ref.model)
 
 
