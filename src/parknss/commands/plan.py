@@ -42,15 +42,18 @@ def resolve_scene(spec: str, scenarios_config: str | None = None):
     raise PlanningError(f"--scene {spec!r}: not a scene file, a cell 0-35 or robust:N")
 
 
-def _refine(scene, coarse, geom):
-    """Run the refinement stage if it is installed: (trajectory|None, ok, reason, s)."""
+def _refine(scene, coarse, geom, cfg=None):
+    """Run the refinement stage if it is installed: (trajectory|None, ok, reason, s).
+
+    ``cfg`` is the planning config (its ``refine`` section and margin); None: the default.
+    """
     try:
         from parknss.sim.planning.refine import refine
     except ImportError:
         return None, False, "refinement unavailable", 0.0
     t0 = time.perf_counter()
     try:
-        res = refine(scene, coarse, geom)
+        res = refine(scene, coarse, geom, cfg)
     except ParknssError as exc:
         return None, False, f"refinement error: {exc}", time.perf_counter() - t0
     return res.trajectory, bool(res.ok), str(res.reason), time.perf_counter() - t0
@@ -89,7 +92,7 @@ def plan_scene(scene, planning_config: str | None = None, refine: bool = True) -
         final = res.trajectory
         out["coarse_min_clearance_m"] = round(res.min_clearance_m, 4)
         if refine:
-            traj, ok, reason, secs = _refine(scene, res.trajectory, geom)
+            traj, ok, reason, secs = _refine(scene, res.trajectory, geom, cfg)
             out["refine_time_s"] = round(secs, 4)
             out["plan_time_s"] = round(res.stats.time_s + secs, 4)
             out["refine_reason"] = reason

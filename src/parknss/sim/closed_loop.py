@@ -183,7 +183,7 @@ def plan_scene(
         refine = None
     if refine is not None:
         try:
-            rr = refine(scene, res.trajectory, geom)
+            rr = refine(scene, res.trajectory, geom, cfg)
         except ParknssError:
             rr = None
         traj = getattr(rr, "trajectory", None)

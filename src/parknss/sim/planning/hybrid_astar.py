@@ -50,6 +50,7 @@ from parknss.sim.geometry import DenseCheckConfig
 from parknss.sim.planning import reeds_shepp as rs
 from parknss.sim.planning.collision_field import FieldChecker
 from parknss.sim.planning.holonomic import HolonomicGrid, HolonomicHeuristic
+from parknss.sim.planning.refine_config import RefineConfig
 from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry, min_turning_radius, steer_for_curvature
 
@@ -101,6 +102,7 @@ class PlanningConfig(StrictModel):
     )
     time_budget_s: float = Field(5.0, gt=0.0)
     dense: DenseCheckConfig = DenseCheckConfig()
+    refine: RefineConfig = RefineConfig()
 
 
 def load_planning_config(path: str | Path | None = None) -> PlanningConfig:

@@ -1,0 +1,169 @@
+"""Speed profiles and path sampling for the refinement: trapezoids, warm starts, output.
+
+* :func:`trapezoid` -- the rest-to-rest trapezoidal (or triangular) speed profile over a
+  length, as speed and time at given arc positions, and its inverse :func:`trapezoid_at_time`.
+* :func:`warm_start` -- the coarse segment timed by a trapezoid and sampled at N+1 knots.
+* :func:`sample_solution` -- a solved segment resampled every ``step`` m of travel, exact on
+  the solution's arcs, with speed, steering and time stamps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from parknss.sim import geometry
+from parknss.sim.planning.refine_problem import SegmentSolution, WarmStart, heading_change
+from parknss.sim.trajectory import Segment
+from parknss.vehicle import VehicleGeometry
+
+
+def _peak(length: float, v_max: float, a_max: float) -> tuple[float, float, float, float]:
+    """(peak speed m/s, ramp length m, ramp time s, total time s) of a rest-to-rest move."""
+    vp = min(v_max, math.sqrt(a_max * max(length, 0.0)))
+    if vp <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    s1, t1 = vp * vp / (2 * a_max), vp / a_max
+    return vp, s1, t1, 2 * t1 + (length - 2 * s1) / vp
+
+
+def trapezoid(arc: np.ndarray, v_max: float, a_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(speed m/s, time s) at arc positions ``arc`` (N,) (0..length, increasing) of the
+    trapezoidal rest-to-rest profile with cruise ``v_max`` and ramps ``a_max``."""
+    s = np.asarray(arc, dtype=float)
+    length = float(s[-1]) if len(s) else 0.0
+    vp, s1, t1, total = _peak(length, v_max, a_max)
+    if vp <= 0.0:
+        return np.zeros_like(s), np.zeros_like(s)
+    speed = np.minimum.reduce(
+        [
+            np.full_like(s, vp),
+            np.sqrt(2 * a_max * s),
+            np.sqrt(2 * a_max * np.maximum(length - s, 0)),
+        ]
+    )
+    t = np.where(
+        s <= s1,
+        np.sqrt(2 * s / a_max),
+        np.where(
+            s <= length - s1,
+            t1 + (s - s1) / vp,
+            total - np.sqrt(2 * np.maximum(length - s, 0) / a_max),
+        ),
+    )
+    speed[-1] = 0.0
+    return speed, t
+
+
+def trapezoid_at_time(t: np.ndarray, length: float, v_max: float, a_max: float):
+    """(arc m, speed m/s) at times ``t`` (s) of the same profile; (total time s) as third."""
+    vp, s1, t1, total = _peak(length, v_max, a_max)
+    tt = np.clip(np.asarray(t, dtype=float), 0.0, total)
+    if vp <= 0.0:
+        return np.zeros_like(tt), np.zeros_like(tt), 0.0
+    back = total - tt
+    arc = np.where(
+        tt <= t1,
+        0.5 * a_max * tt**2,
+        np.where(back >= t1, s1 + vp * (tt - t1), length - 0.5 * a_max * back**2),
+    )
+    speed = np.minimum.reduce([np.full_like(tt, vp), a_max * tt, a_max * back])
+    return arc, speed, total
+
+
+def poses_at(seg: Segment, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(poses (K, 3), index (K,) of the coarse interval) at arc positions ``s`` along ``seg``,
+    following the circular arc through each pair of coarse poses."""
+    arc = seg.arc_length
+    i = np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(arc) - 2)
+    gap = np.maximum(arc[i + 1] - arc[i], 1e-12)
+    tau = np.clip((s - arc[i]) / gap, 0.0, 1.0)
+    return geometry.arc_interpolate(seg.poses[i], seg.poses[i + 1], tau), i
+
+
+def warm_start(
+    seg: Segment,
+    geom: VehicleGeometry,
+    v_max: float,
+    a_max: float,
+    dt: float,
+    n_min: int,
+    n_max: int,
+) -> WarmStart:
+    """The coarse segment timed by a trapezoid (``v_max``, ``a_max``) at N+1 knots, N from
+    the time step ``dt`` (s) clamped to [n_min, n_max]; steering from the coarse steer."""
+    length = seg.length
+    _, _, total = trapezoid_at_time(np.zeros(1), length, v_max, a_max)
+    n = int(min(max(math.ceil(total / dt), n_min), n_max))
+    t = np.linspace(0.0, total, n + 1)
+    s, speed, _ = trapezoid_at_time(t, length, v_max, a_max)
+    s[-1] = length
+    poses, i = poses_at(seg, s)
+    poses[0], poses[-1] = seg.poses[0], seg.poses[-1]
+    if seg.steer is not None:
+        delta = np.radians(
+            np.asarray(seg.steer, dtype=float)[np.minimum(i + 1, len(seg.steer) - 1)]
+        )
+        delta = delta / geom.steer_ratio
+    else:
+        delta = np.zeros(n + 1)
+    lock = math.radians(geom.steer_lock_deg / geom.steer_ratio)
+    return WarmStart(poses, speed, np.clip(delta, -lock, lock), total / n, int(seg.direction))
+
+
+def sample_solution(
+    sol: SegmentSolution,
+    direction: int,
+    ends: tuple[np.ndarray, np.ndarray],
+    geom: VehicleGeometry,
+    step: float,
+) -> Segment:
+    """The solved segment as a dense :class:`Segment`: poses every <= ``step`` m along each
+        interval's arc (knots included), speed (>= 0, 0 at the end), steering-wheel angle (deg)
+        and time (s). Intervals without travel add no pose; their time carries over. The first
+    and last poses are set to ``ends`` (the fixed poses the solver met to its tolerance)."""
+    p, v, de, h = sol.poses, np.maximum(sol.speed, 0.0), sol.delta, sol.h
+    start_pose, end_pose = (np.asarray(e, dtype=float) for e in ends)
+    n = len(p) - 1
+    dist = h * (v[:-1] + v[1:]) / 2  # travel per interval, m
+    turn = heading_change(v[:-1], v[1:], de[:-1], de[1:], h, geom.wheelbase)
+    kap = turn / np.maximum(dist, 1e-12)  # curvature of each interval's arc, 1/m
+    acc = (v[1:] - v[:-1]) / h
+    out_p, out_v, out_d, out_t = [start_pose], [v[0]], [de[0]], [0.0]
+    for k in range(n):
+        if dist[k] <= 1e-6:
+            continue
+        m = max(1, math.ceil(dist[k] / step - 1e-9))
+        sub = dist[k] * np.arange(1, m + 1) / m  # travelled within the interval, m
+        sig = direction * sub
+        dth = sig * kap[k]
+        chord = sig * np.sinc(dth / 2 / np.pi)
+        ang = p[k, 2] + dth / 2
+        out_p.extend(
+            np.column_stack(
+                [p[k, 0] + chord * np.cos(ang), p[k, 1] + chord * np.sin(ang), p[k, 2] + dth]
+            )
+        )
+        root = np.sqrt(np.maximum(v[k] ** 2 + 2 * acc[k] * sub, 0.0))
+        tau = np.clip(2 * sub / np.maximum(v[k] + root, 1e-12), 0.0, h)
+        out_v.extend(np.maximum(v[k] + acc[k] * tau, 0.0))
+        out_d.extend(de[k] + (de[k + 1] - de[k]) * tau / h)
+        out_t.extend(k * h + tau)
+    poses = np.asarray(out_p)
+    speed, delta, t = np.asarray(out_v), np.asarray(out_d), np.asarray(out_t)
+    if len(poses) < 2:  # no travel at all: keep the two end poses
+        poses = np.vstack([start_pose, end_pose])
+        speed, delta, t = np.zeros(2), de[[0, -1]], np.array([0.0, n * h])
+    poses[-1] = end_pose
+    speed[0] = speed[-1] = 0.0  # standstill by constraint, to solver tolerance
+    t[-1] = n * h
+    steer = np.degrees(delta) * geom.steer_ratio
+    return Segment(poses, direction, speed=speed, steer=steer, t=t)
+
+
+def profile_segment(seg: Segment, v_max: float, a_max: float) -> Segment:
+    """The coarse segment with a trapezoidal speed and time profile (its poses unchanged)."""
+    speed, t = trapezoid(seg.arc_length, v_max, a_max)
+    steer = None if seg.steer is None else np.asarray(seg.steer, dtype=float).copy()
+    return Segment(seg.poses.copy(), seg.direction, speed=speed, steer=steer, t=t)
