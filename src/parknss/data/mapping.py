@@ -2,10 +2,14 @@
 
 A mapping YAML (configs/mapping_example.yaml documents every key) says, per schema
 channel, which source column holds it and in which unit; values are converted only
-through :func:`parknss.signals.convert_to_schema`. Columns named like the schema and not
-mentioned are taken as they are (schema units). Gear codes (``R``/``N``/``P``/``D`` or
-numbers) map to -1/0/+1 through ``gear_values``. Nothing is guessed: an unknown unit, a
-unit of the wrong kind, a missing column or an unmapped gear code is a one-line error.
+through :func:`parknss.signals.convert_to_schema`. For bus logs the same file names the
+MDF channel (``column``, found by ``mdf.match``) or the CAN ``message``/``signal`` (with
+the DBC in ``can.dbc``), and ``resample`` sets the tolerance of the 100 Hz resampling
+(configs/mapping_mdf_example.yaml, configs/mapping_can_example.yaml). Columns named like
+the schema and not mentioned are taken as they are (schema units). Gear codes
+(``R``/``N``/``P``/``D`` or numbers) map to -1/0/+1 through ``gear_values``. Nothing is
+guessed: an unknown unit, a unit of the wrong kind, a missing column or an unmapped gear
+code is a one-line error.
 """
 
 from __future__ import annotations
@@ -14,23 +18,65 @@ import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import yaml
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from parknss.config import StrictModel
 from parknss.errors import ConfigError, DataError
-from parknss.signals import CHANNEL_BY_NAME, TRUTH_PREFIX, UNIT_CONVERSIONS, convert_to_schema
+from parknss.signals import (
+    CHANNEL_BY_NAME,
+    DT,
+    TRUTH_PREFIX,
+    UNIT_CONVERSIONS,
+    convert_to_schema,
+)
 from parknss.vehicle import VehicleGeometry
+
+Interpolation = Literal["auto", "linear", "hold"]
 
 
 class ChannelSource(StrictModel):
-    """Where one schema channel comes from: a source column, its unit, its sign."""
+    """Where one schema channel comes from: a source column, its unit, its sign.
 
-    column: str = Field(min_length=1)
-    unit: str | None = None  # None: already in the schema unit
+    ``column`` names the column (CSV, Parquet, .mat) or the MDF channel (an exact name or
+    a pattern, see :class:`MdfOptions`); a CAN log names ``message`` and ``signal`` of
+    the DBC instead. ``group`` picks the MDF data group when a name occurs in several.
+    ``interpolation`` says how a bus-log channel goes onto the 100 Hz grid: ``linear``,
+    ``hold`` (previous value), or ``auto`` (hold for gear, integer, enumerated/text and
+    all CAN signals; linear for other MDF channels).
+    """
+
+    column: str | None = Field(None, min_length=1)
+    unit: str | None = None  # None: already in the schema unit (or the MDF/DBC unit)
     invert: bool = False  # multiply by -1 after conversion (opposite sign convention)
+    message: str | None = Field(None, min_length=1)  # CAN: message name in the DBC
+    signal: str | None = Field(None, min_length=1)  # CAN: signal name in that message
+    group: int | None = Field(None, ge=0)  # MDF: data group index of the channel
+    interpolation: Interpolation = "auto"
+
+    @model_validator(mode="after")
+    def _one_source(self) -> ChannelSource:
+        can = self.message is not None or self.signal is not None
+        if can and (self.message is None or self.signal is None):
+            raise ValueError("a CAN source needs both 'message' and 'signal'")
+        if can == (self.column is not None):
+            raise ValueError(
+                "give 'column' (CSV, Parquet, .mat or MDF channel) or 'message' and "
+                "'signal' (CAN), not both"
+                if can
+                else "give 'column' (CSV, Parquet, .mat or MDF channel) or 'message' and "
+                "'signal' (CAN)"
+            )
+        return self
+
+    def describe(self) -> str:
+        """The source in words, for messages: ``column 'X'`` or ``message 'M', signal 'S'``."""
+        if self.column is not None:
+            return f"column {self.column!r}"
+        return f"message {self.message!r}, signal {self.signal!r}"
 
 
 class TimeSource(StrictModel):
@@ -64,6 +110,49 @@ class VehicleInfo(StrictModel):
         return v
 
 
+class MdfOptions(StrictModel):
+    """How MDF4 channels are found (configs/mapping_mdf_example.yaml).
+
+    Attributes:
+        match: how ``column`` is compared with the file's channel names: ``exact``, or
+            asammdf's channel search (``plain`` substring, ``wildcard`` like ``*VehSpd``,
+            ``regex``); the match must be one channel (use ``group`` if it is not).
+        case_insensitive: compare names ignoring case (search modes only).
+        use_file_units: without a ``unit`` in the mapping, take the channel's MDF unit
+            (it must be a unit parknss knows); False: schema units are assumed.
+    """
+
+    match: Literal["exact", "plain", "wildcard", "regex"] = "exact"
+    case_insensitive: bool = False
+    use_file_units: bool = True
+
+
+class CanOptions(StrictModel):
+    """How CAN logs (.blf, .asc) are decoded (configs/mapping_can_example.yaml).
+
+    Attributes:
+        dbc: the DBC file; a relative path is relative to the mapping YAML's folder.
+        bus_channel: only frames of this bus channel (python-can's 0-based number);
+            None takes every channel.
+        use_file_units: without a ``unit`` in the mapping, take the DBC signal's unit.
+    """
+
+    dbc: str | None = Field(None, min_length=1)
+    bus_channel: int | None = Field(None, ge=0)
+    use_file_units: bool = True
+
+
+class ResampleOptions(StrictModel):
+    """Resampling of bus logs onto the 100 Hz grid.
+
+    Attributes:
+        time_tolerance_s: a time stamp within this of a grid time counts as on it, s
+            (loggers store times with finite resolution; BLF in ns).
+    """
+
+    time_tolerance_s: float = Field(1.0e-6, gt=0.0, lt=DT / 2)
+
+
 class ChannelMapping(StrictModel):
     """A whole mapping file (see configs/mapping_example.yaml)."""
 
@@ -72,6 +161,9 @@ class ChannelMapping(StrictModel):
     gear_values: dict[str, int] | None = None
     csv: CsvOptions = CsvOptions()
     vehicle: VehicleInfo = VehicleInfo()
+    mdf: MdfOptions = MdfOptions()
+    can: CanOptions = CanOptions()
+    resample: ResampleOptions = ResampleOptions()
 
     @field_validator("gear_values", mode="before")
     @classmethod
@@ -94,6 +186,11 @@ def _check_mapping(m: ChannelMapping, where: str) -> None:
             raise ConfigError(f"{where}: channel 't': map time under 'time:', not 'channels:'")
         if name not in CHANNEL_BY_NAME:
             raise ConfigError(f"{where}: channel {name!r}: not a schema channel")
+        if CHANNEL_BY_NAME[name].integer and src.interpolation == "linear":
+            raise ConfigError(
+                f"{where}: channel {name!r}: an integer channel is never interpolated "
+                "(interpolation: hold or auto)"
+            )
         if src.unit is None:
             continue
         if src.unit not in UNIT_CONVERSIONS:
@@ -134,6 +231,9 @@ def load_mapping(path: str | Path) -> ChannelMapping:
         loc = ".".join(str(x) for x in err["loc"])
         raise ConfigError(f"{p}: field {loc!r}: {err['msg']}") from exc
     _check_mapping(m, str(p))
+    if m.can.dbc is not None and not Path(m.can.dbc).is_absolute():
+        can = m.can.model_copy(update={"dbc": str(p.parent / m.can.dbc)})
+        m = m.model_copy(update={"can": can})
     return m
 
 
@@ -236,6 +336,11 @@ def apply_mapping(raw: dict[str, Column], m: ChannelMapping, source: str) -> dic
                     else parse_numbers(col, _label(name, name), source, m.csv.decimal)
                 )
             continue
+        if src.column is None:
+            raise DataError(
+                f"{source}: channel {name!r}: the mapping gives a CAN {src.describe()}; "
+                "this log needs a 'column'"
+            )
         if src.column not in raw:
             raise DataError(
                 f"{source}: channel {name!r}: mapped column {src.column!r} not found "
@@ -263,4 +368,4 @@ def mapping_hint(m: ChannelMapping, channel: str | None) -> str:
     if src is None:
         return ""
     unit = src.unit or CHANNEL_BY_NAME[channel].unit
-    return f" (mapped from column {src.column!r} in {unit!r}; check the mapping's unit)"
+    return f" (mapped from {src.describe()} in {unit!r}; check the mapping's unit)"
