@@ -1,10 +1,12 @@
-"""Reading and writing trials and campaigns: Parquet (native), CSV and MATLAB .mat.
+"""Reading and writing trials and campaigns: Parquet (native), CSV, MATLAB .mat, bus logs.
 
 Native campaign = a folder with one Parquet file per trial plus ``campaign.json``
-(name, meta, schema version, one entry per trial). Single trials can also be CSV or .mat
-in the layouts of docs/data.md. Every load goes through an optional channel mapping
-(:mod:`parknss.data.mapping`) and then :func:`~parknss.data.validate.validate_trial`;
-every problem is a one-line :class:`~parknss.errors.DataError` naming the file.
+(name, meta, schema version, one entry per trial). Single trials can also be CSV, .mat
+or MDF4 in the layouts of docs/data.md, and CAN logs (.blf/.asc with a DBC) are read;
+bus logs are resampled onto the 100 Hz grid first (:mod:`parknss.data.resample`). Every
+load goes through an optional channel mapping (:mod:`parknss.data.mapping`) and then
+:func:`~parknss.data.validate.validate_trial`; every problem is a one-line
+:class:`~parknss.errors.DataError` naming the file.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import scipy.io
 from pydantic import Field, ValidationError
 
 from parknss.config import StrictModel
+from parknss.data.canlog import CAN_SUFFIXES, read_can
 from parknss.data.mapping import (
     ChannelMapping,
     Column,
@@ -32,6 +35,8 @@ from parknss.data.mapping import (
     as_mapping,
     mapping_hint,
 )
+from parknss.data.mdf import MDF_SUFFIXES, read_mdf, write_mdf
+from parknss.data.resample import BusLog
 from parknss.data.trial import Campaign, Trial
 from parknss.data.validate import TrialDataError, validate_trial
 from parknss.errors import DataError
@@ -42,7 +47,8 @@ CAMPAIGN_JSON = "campaign.json"
 CAMPAIGN_FORMAT = "parknss-campaign"
 META_KEY = "parknss_trial"  # trial metadata: Parquet schema key, CSV comment, .mat variable
 MANIFEST = "manifest.csv"
-LOG_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".pq", ".mat")
+LOG_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".pq", ".mat", *MDF_SUFFIXES, *CAN_SUFFIXES)
+LOG_KINDS = ".csv, .parquet, .mat, .mf4/.mdf (MDF4) or .blf/.asc (CAN)"
 _NAME_RE = re.compile(r"^(?P<cls>[A-Za-z][A-Za-z0-9_]*?)_r(?P<rep>[0-9]+)$")
 _SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
@@ -253,6 +259,27 @@ def write_trial_mat(trial: Trial, path: str | Path) -> Path:
     return p
 
 
+# ------------------------------------------------------------------------ MDF4
+
+
+def write_trial_mdf(trial: Trial, path: str | Path) -> Path:
+    """One trial as MDF4: master t (s), schema units, gear int8, metadata in the header."""
+    p = Path(path)
+    comment = f"{META_KEY} {json.dumps(_trial_meta(trial), sort_keys=True)}"
+    return write_mdf(trial.channels, _ordered(trial.channels), comment, p)
+
+
+def _read_bus(path: Path, m: ChannelMapping) -> tuple[Raw, ChannelMapping]:
+    """A bus log resampled onto the grid, its metadata, and the mapping to apply."""
+    _nonempty(path)
+    log: BusLog = read_mdf(path, m) if path.suffix.lower() in MDF_SUFFIXES else read_can(path, m)
+    meta: dict = {"provenance": json.dumps(log.provenance, sort_keys=True)}
+    text = log.header_text or ""
+    if text.startswith(META_KEY):
+        meta = _parse_meta(text[len(META_KEY) :], path)
+    return (log.raw, meta), log.applied
+
+
 # ------------------------------------------------------------------------ dispatch
 
 _READERS: dict[str, Callable[..., Raw]] = {
@@ -261,27 +288,31 @@ _READERS: dict[str, Callable[..., Raw]] = {
     ".pq": lambda p, _o: _read_parquet(p),
     ".mat": lambda p, _o: _read_mat(p),
 }
+_BUS_SUFFIXES: tuple[str, ...] = (*MDF_SUFFIXES, *CAN_SUFFIXES)
 _WRITERS: dict[str, Callable[[Trial, Path], Path]] = {
     ".csv": write_trial_csv,
     ".parquet": write_trial_parquet,
     ".pq": write_trial_parquet,
     ".mat": write_trial_mat,
+    ".mf4": write_trial_mdf,
+    ".mdf": write_trial_mdf,
 }
 
 
 def _suffix(path: Path) -> str:
     suf = path.suffix.lower()
-    if suf not in _READERS:
-        raise DataError(
-            f"{path}: unsupported file type {suf or '(none)'!r} (expected .csv, .parquet or .mat)"
-        )
+    if suf not in _READERS and suf not in _BUS_SUFFIXES:
+        raise DataError(f"{path}: unsupported file type {suf or '(none)'!r} (expected {LOG_KINDS})")
     return suf
 
 
 def write_trial(trial: Trial, path: str | Path) -> Path:
-    """Write one trial; the format follows the extension (.csv, .parquet/.pq, .mat)."""
+    """Write one trial; the format follows the extension (.csv, .parquet/.pq, .mat, .mf4)."""
     p = Path(path)
-    return _WRITERS[_suffix(p)](trial, p)
+    suf = _suffix(p)
+    if suf not in _WRITERS:
+        raise DataError(f"{p}: parknss reads {suf} logs but does not write them")
+    return _WRITERS[suf](trial, p)
 
 
 def infer_identity(path: str | Path) -> tuple[str, int]:
@@ -312,8 +343,10 @@ def read_trial(
     """Read and validate one trial file; the format follows the extension.
 
     Args:
-        path: a .csv, .parquet/.pq or .mat file (layouts in docs/data.md).
-        mapping: a ChannelMapping or mapping-YAML path for non-schema names/units.
+        path: a .csv, .parquet/.pq, .mat, .mf4/.mdf, .blf or .asc file (layouts in
+            docs/data.md; bus logs are resampled onto the 100 Hz grid first).
+        mapping: a ChannelMapping or mapping-YAML path for non-schema names/units
+            (required for CAN logs: the DBC and each channel's message and signal).
         maneuver, repetition: the trial's class and repetition; by default taken from
             the file's parknss_trial metadata, else from a name like park_in_left_r1.
 
@@ -322,8 +355,12 @@ def read_trial(
     """
     p = Path(path)
     m = as_mapping(mapping)
-    raw, meta = _READERS[_suffix(p)](p, m.csv)
-    channels = apply_mapping(raw, m, str(p))
+    suf = _suffix(p)
+    if suf in _BUS_SUFFIXES:
+        (raw, meta), applied = _read_bus(p, m)
+    else:
+        (raw, meta), applied = _READERS[suf](p, m.csv), m
+    channels = apply_mapping(raw, applied, str(p))
     if maneuver is None and repetition is None and {"id", "maneuver", "repetition"} <= set(meta):
         tid, cls, rep = meta["id"], meta["maneuver"], meta["repetition"]
     else:
@@ -344,7 +381,7 @@ def read_trial(
     try:
         return validate_trial(trial, str(p))
     except TrialDataError as exc:
-        raise DataError(f"{exc}{mapping_hint(m, exc.channel)}") from exc
+        raise DataError(f"{exc}{mapping_hint(applied, exc.channel)}") from exc
 
 
 # ------------------------------------------------------------------------ campaign
@@ -506,7 +543,7 @@ def _read_manifest(src: Path, logs: list[Path]) -> list[tuple[Path, str, int]]:
             raise DataError(f"{mpath}: line {n}: file {name!r} listed twice")
         if not f.is_file() or f.suffix.lower() not in LOG_SUFFIXES:
             raise DataError(
-                f"{mpath}: line {n}: file {name!r} not found as a .csv/.parquet/.mat log in {src}"
+                f"{mpath}: line {n}: file {name!r} not found as a log ({LOG_KINDS}) in {src}"
             )
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", cls):
             raise DataError(f"{mpath}: line {n}: class {cls!r} is not a name (letters, digits, _)")
@@ -552,7 +589,7 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
     else:
         jobs = [(f, *infer_identity(f)) for f in logs]
     if not jobs:
-        raise DataError(f"{folder}: no .csv, .parquet or .mat logs found")
+        raise DataError(f"{folder}: no logs found ({LOG_KINDS})")
     trials: list[Trial] = []
     origin: dict[str, Path] = {}
     for f, cls, rep in jobs:
@@ -588,5 +625,6 @@ __all__ = [
     "write_trial",
     "write_trial_csv",
     "write_trial_mat",
+    "write_trial_mdf",
     "write_trial_parquet",
 ]

@@ -1,0 +1,421 @@
+"""CAN logs (.blf, .asc) with a DBC: decoding, zero-order hold on 100 Hz, units, errors."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import can
+import cantools
+import numpy as np
+import pytest
+import yaml
+from cantools.database.can import Database, Message
+from cantools.database.can import Signal as CanSignal
+from cantools.database.conversion import BaseConversion
+
+from parknss.cli import main
+from parknss.config import CONFIG_DIR
+from parknss.data.io import import_folder, read_campaign, read_trial, write_trial
+from parknss.data.mapping import load_mapping
+from parknss.errors import DataError, ParknssError
+from parknss.signals import DEG_PER_RAD, KMH_PER_MS, REQUIRED_CHANNELS
+
+EXAMPLE = CONFIG_DIR / "mapping_can_example.yaml"
+EPOCH = 1_700_000_000.0  # loggers stamp frames in absolute time
+GEAR_EVENTS = ((0.0, "P"), (1.234, "R"), (3.0, "D"), (4.005, "N"))
+GEAR_CHANGES_S = (1.24, 3.0, 4.01)  # first grid time at/after each change
+
+
+def _sig(name, start, scale, unit="", signed=True, length=16, choices=None) -> CanSignal:
+    conv = BaseConversion.factory(scale=scale, offset=0, choices=choices)
+    return CanSignal(name, start, length, is_signed=signed, conversion=conv, unit=unit)
+
+
+def vehicle_dbc() -> Database:
+    """The DBC of configs/mapping_can_example.yaml; units km/h, deg/s, MPa, Nm, deg."""
+    gear = {0: "P", 1: "R", 2: "N", 3: "D"}
+    msgs = [
+        Message(
+            0x100, "ESP", 8, [_sig("VehSpd", 0, 0.01, "km/h"), _sig("YawRate", 16, 0.01, "deg/s")]
+        ),
+        Message(
+            0x120, "IMU", 8, [_sig("AccX", 0, 0.001, "m/s^2"), _sig("AccY", 16, 0.001, "m/s^2")]
+        ),
+        Message(
+            0x130,
+            "BRK",
+            8,
+            [_sig("BrkPrs", 0, 0.001, "MPa", signed=False), _sig("DecelReq", 16, 0.001, "m/s^2")],
+        ),
+        Message(
+            0x18FF0140,
+            "MOT",
+            8,
+            [_sig("MotTrq", 0, 0.1, "Nm"), _sig("MotTrqReq", 16, 0.1, "Nm")],
+            is_extended_frame=True,
+        ),
+        Message(
+            0x150,
+            "STR",
+            8,
+            [_sig("StrWhlAng", 0, 0.1, "deg"), _sig("StrWhlAngReq", 16, 0.1, "deg")],
+        ),
+        Message(0x160, "GEAR", 1, [_sig("GearPos", 0, 1, signed=False, length=8, choices=gear)]),
+    ]
+    return Database(messages=msgs)
+
+
+# Analytic signals in schema units, t in s from the first frame.
+SIGNALS: dict[str, tuple[str, str, Callable, float]] = {
+    # schema channel: (message, signal, f(t) in schema units, factor schema -> DBC unit)
+    "vx": ("ESP", "VehSpd", lambda t: 1.5 * np.sin(2 * np.pi * t / 6), KMH_PER_MS),
+    "yaw_rate": ("ESP", "YawRate", lambda t: 0.3 * np.sin(2 * np.pi * t / 4), DEG_PER_RAD),
+    "ax": ("IMU", "AccX", lambda t: 0.5 * t - 1.0, 1.0),
+    "ay": ("IMU", "AccY", lambda t: -0.25 * t + 0.5, 1.0),
+    "brake_pressure": ("BRK", "BrkPrs", lambda t: t + 5.0, 0.1),
+    "decel_cmd": ("BRK", "DecelReq", lambda t: -2.0 + 0.1 * t, 1.0),
+    "torque": ("MOT", "MotTrq", lambda t: 50.0 + 10.0 * t, 1.0),
+    "torque_cmd": ("MOT", "MotTrqReq", lambda t: 55.0 + 10.0 * t, 1.0),
+    "steer": ("STR", "StrWhlAng", lambda t: 100.0 * np.sin(2 * np.pi * t / 5), 1.0),
+    "steer_cmd": ("STR", "StrWhlAngReq", lambda t: 20.0 * t, 1.0),
+}
+# message: (first frame s, period s, last frame s); BRK starts late, MOT is off the grid
+TIMING = {
+    "ESP": (0.0, 0.02, 6.0),
+    "IMU": (0.003, 0.01, 6.0),
+    "BRK": (0.237, 0.05, 6.0),
+    "MOT": (0.005, 0.01, 6.0),
+    "STR": (0.0, 0.01, 6.0),
+}
+
+
+def _frame_times(msg: str) -> np.ndarray:
+    t0, period, t1 = TIMING[msg]
+    return t0 + np.arange(int(np.floor((t1 - t0) / period + 1e-9)) + 1) * period
+
+
+def frames(db: Database) -> list[can.Message]:
+    """Every frame of the test drive, sorted by time: cyclic messages plus gear events."""
+    out = []
+    for name in TIMING:
+        msg = db.get_message_by_name(name)
+        for t in _frame_times(name):
+            data = {
+                s: SIGNALS[c][2](t) * SIGNALS[c][3]
+                for c, (m, s, _, _) in SIGNALS.items()
+                if m == name
+            }
+            out.append((t, msg, data))
+    gear = db.get_message_by_name("GEAR")
+    out += [(t, gear, {"GearPos": label}) for t, label in GEAR_EVENTS]
+    out.sort(key=lambda x: x[0])
+    return [
+        can.Message(
+            timestamp=EPOCH + t,
+            arbitration_id=msg.frame_id,
+            is_extended_id=msg.is_extended_frame,
+            data=msg.encode(data),
+            channel=0,
+        )
+        for t, msg, data in out
+    ]
+
+
+def write_log(path: Path, messages: list[can.Message]) -> Path:
+    writer = can.BLFWriter(str(path)) if path.suffix == ".blf" else can.ASCWriter(str(path))
+    for m in messages:
+        writer.on_message_received(m)
+    writer.stop()
+    return path
+
+
+def setup_logs(folder: Path, suffix: str = ".blf", messages=None, name="park_in_left_r1"):
+    """The DBC as vehicle.dbc and the example mapping beside it, and one log; -> mapping."""
+    folder.mkdir(parents=True, exist_ok=True)
+    db = vehicle_dbc()
+    (folder.parent / "vehicle.dbc").write_text(db.as_dbc_string())
+    shutil.copy(EXAMPLE, folder.parent / "mapping.yaml")
+    write_log(folder / f"{name}{suffix}", frames(db) if messages is None else messages)
+    return folder.parent / "mapping.yaml"
+
+
+@pytest.fixture(scope="module", params=[".blf", ".asc"])
+def drive(request, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("can") / "logs"
+    mapping = setup_logs(folder, request.param)
+    return read_trial(folder / f"park_in_left_r1{request.param}", mapping)
+
+
+def _held(name: str, t: np.ndarray) -> np.ndarray:
+    """The value of the last frame at or before each t (what a ZOH must give), schema units."""
+    msg, sig, f, factor = SIGNALS[name]
+    ft = _frame_times(msg)
+    db = vehicle_dbc()
+    m = db.get_message_by_name(msg)
+    quantized = np.array(
+        [
+            m.decode(m.encode({s.name: 0.0 for s in m.signals} | {sig: f(x) * factor}))[sig]
+            for x in ft
+        ]
+    )
+    idx = np.searchsorted(ft, t + 1e-6, side="right") - 1
+    return quantized[idx] / factor
+
+
+# ------------------------------------------------------------------------ reading
+
+
+def test_signals_are_decoded_and_held_on_the_100hz_grid(drive):
+    tr = drive
+    t = tr["t"]
+    # BRK's first frame at 0.237 s: every signal received once from 0.24 s; the last
+    # frames at 6.0 s end it.
+    np.testing.assert_array_equal(t, np.arange(24, 601) / 100.0)
+    assert set(tr.channels) == set(REQUIRED_CHANNELS)
+    for name in SIGNALS:
+        np.testing.assert_allclose(tr[name], _held(name, t), rtol=0, atol=1e-9, err_msg=name)
+    # held, not interpolated: only values that were sent (MOT frames are 5 ms off the grid)
+    for name in ("torque", "ax", "brake_pressure"):
+        sent = _held(name, _frame_times(SIGNALS[name][0]) + 1e-9)
+        assert set(np.round(tr[name], 9)) <= set(np.round(sent, 9)), name
+    prov = json.loads(tr.provenance)
+    assert "'BRK'" in prov["start_limited_by"] and prov["span_s"][0] == pytest.approx(0.237)
+    assert prov["dbc"].endswith("vehicle.dbc") and prov["format"] in ("blf", "asc")
+
+
+def test_units_converted_from_the_dbc_and_the_mapping(drive):
+    t = drive["t"]
+    # km/h (mapping), deg/s (DBC), MPa (DBC) -> m/s, rad/s, bar
+    np.testing.assert_allclose(drive["vx"], 1.5 * np.sin(2 * np.pi * t / 6), atol=0.02)
+    np.testing.assert_allclose(drive["yaw_rate"], 0.3 * np.sin(2 * np.pi * t / 4), atol=0.01)
+    np.testing.assert_allclose(drive["brake_pressure"], t + 5.0, atol=0.05 + 0.01)
+    assert np.abs(drive["vx"]).max() < 1.51  # not km/h
+
+
+def test_gear_labels_are_held_and_mapped(drive):
+    g, t = drive["gear"], drive["t"]
+    assert set(np.unique(g)) <= {-1.0, 0.0, 1.0}
+    changes = np.flatnonzero(np.diff(g)) + 1
+    np.testing.assert_allclose(t[changes], GEAR_CHANGES_S, atol=1e-12)  # 3.0 s exactly too
+    np.testing.assert_array_equal(g[changes], [-1.0, 1.0, 0.0])
+    assert g[-1] == 0.0  # the last event (4.005 s) is held to the end, not a crop
+
+
+def test_bus_channel_filter_and_start_at_zero(tmp_path):
+    db = vehicle_dbc()
+    msgs = frames(db)
+    noise = [
+        can.Message(
+            timestamp=m.timestamp,
+            arbitration_id=m.arbitration_id,
+            is_extended_id=m.is_extended_id,
+            data=bytes(8),
+            channel=1,
+        )
+        for m in msgs
+        if m.arbitration_id == 0x100
+    ]
+    both = sorted(msgs + noise, key=lambda m: m.timestamp)
+    mapping = setup_logs(tmp_path / "logs", ".blf", both)
+    doc = yaml.safe_load(mapping.read_text())
+    doc["can"]["bus_channel"] = 0
+    doc["time"] = {"start_at_zero": True}
+    mapping.write_text(yaml.safe_dump(doc))
+    tr = read_trial(tmp_path / "logs" / "park_in_left_r1.blf", mapping)
+    assert tr["t"][0] == 0.0 and tr["t"][-1] == pytest.approx(5.76)
+    assert np.abs(tr["vx"]).max() > 1.4  # channel 1's zero frames were not mixed in
+
+
+def test_import_folder_of_blf_and_asc_and_cli(tmp_path, capsys):
+    src = tmp_path / "logs"
+    mapping = setup_logs(src, ".blf")
+    write_log(src / "park_out_left_r2.asc", frames(vehicle_dbc()))
+    camp = import_folder(src, mapping)
+    assert camp.ids == ["park_in_left_r1", "park_out_left_r2"]
+    np.testing.assert_allclose(camp[0]["steer"], camp[1]["steer"], atol=1e-9)  # same drive
+    out = tmp_path / "camp"
+    assert main(["campaign", "import", str(src), "--out", str(out), "--mapping", str(mapping)]) == 0
+    assert len(read_campaign(out)) == 2 and "imported 2 trials" in capsys.readouterr().err
+
+
+def test_can_logs_are_not_written(tmp_path):
+    tr = read_campaign("campaigns/default")[0]
+    with pytest.raises(DataError, match=r"x\.blf: parknss reads \.blf logs but does not write"):
+        write_trial(tr, tmp_path / "x.blf")
+
+
+def test_dbc_path_is_relative_to_the_mapping_file():
+    m = load_mapping(EXAMPLE)
+    assert m.can.dbc == str(CONFIG_DIR / "vehicle.dbc")
+
+
+# ------------------------------------------------------------------- malformed logs
+
+
+def _edit_mapping(mapping: Path, edit: Callable[[dict], None]) -> Path:
+    doc = yaml.safe_load(mapping.read_text())
+    edit(doc)
+    mapping.write_text(yaml.safe_dump(doc))
+    return mapping
+
+
+def _missing_dbc(src: Path) -> Path:
+    m = setup_logs(src)
+    (src.parent / "vehicle.dbc").unlink()
+    return m
+
+
+def _no_dbc(src: Path) -> Path:
+    return _edit_mapping(setup_logs(src), lambda d: d.pop("can"))
+
+
+def _bad_dbc(src: Path) -> Path:
+    m = setup_logs(src)
+    (src.parent / "vehicle.dbc").write_text("BO_ this is not a DBC\n")
+    return m
+
+
+def _unknown_message(src: Path) -> Path:
+    return _edit_mapping(setup_logs(src), lambda d: d["channels"]["ax"].update(message="IMU2"))
+
+
+def _unknown_signal(src: Path) -> Path:
+    return _edit_mapping(setup_logs(src), lambda d: d["channels"]["ay"].update(signal="AccZ"))
+
+
+def _no_frames(src: Path) -> Path:
+    msgs = [m for m in frames(vehicle_dbc()) if m.arbitration_id != 0x150]
+    return setup_logs(src, ".blf", msgs)
+
+
+def _non_monotonic(src: Path) -> Path:
+    msgs = frames(vehicle_dbc())
+    k = next(i for i, m in enumerate(msgs) if m.arbitration_id == 0x100 and m.timestamp > EPOCH + 2)
+    msgs[k].timestamp -= 0.5
+    return setup_logs(src, ".blf", msgs)
+
+
+def _truncated_blf(src: Path) -> Path:
+    m = setup_logs(src, ".blf")
+    p = src / "park_in_left_r1.blf"
+    p.write_bytes(p.read_bytes()[:-100])
+    return m
+
+
+def _truncated_asc(src: Path) -> Path:
+    m = setup_logs(src, ".asc")
+    p = src / "park_in_left_r1.asc"
+    text = p.read_text()
+    p.write_text(text[: len(text) // 2])
+    return m
+
+
+def _garbage_blf(src: Path) -> Path:
+    m = setup_logs(src, ".blf")
+    (src / "park_in_left_r1.blf").write_bytes(b"\x00garbage" * 50)
+    return m
+
+
+def _unmapped(src: Path) -> Path:
+    return _edit_mapping(setup_logs(src), lambda d: d["channels"].pop("ay"))
+
+
+def _short_frame(src: Path) -> Path:
+    msgs = frames(vehicle_dbc())
+    k = next(i for i, m in enumerate(msgs) if m.arbitration_id == 0x150 and m.timestamp > EPOCH + 1)
+    msgs[k] = can.Message(
+        timestamp=msgs[k].timestamp,
+        arbitration_id=0x150,
+        is_extended_id=False,
+        data=b"\x01\x02",
+        channel=0,
+    )
+    return setup_logs(src, ".blf", msgs)
+
+
+def _column_mapping(src: Path) -> Path:
+    return _edit_mapping(setup_logs(src), lambda d: d["channels"].update(vx={"column": "VehSpd"}))
+
+
+# (case, file named in the message, fragments)
+MALFORMED: dict[str, tuple[Callable[[Path], Path], str, tuple[str, ...]]] = {
+    "missing_dbc": (
+        _missing_dbc,
+        "park_in_left_r1.blf",
+        ("vehicle.dbc not found (can.dbc in the mapping)",),
+    ),
+    "no_dbc": (_no_dbc, "park_in_left_r1.blf", ("a CAN log needs a DBC: set can.dbc",)),
+    "bad_dbc": (_bad_dbc, "park_in_left_r1.blf", ("vehicle.dbc: not readable",)),
+    "unknown_message": (
+        _unknown_message,
+        "park_in_left_r1.blf",
+        ("channel 'ax' (message 'IMU2', signal 'AccX'): message not in the DBC vehicle.dbc",),
+    ),
+    "unknown_signal": (
+        _unknown_signal,
+        "park_in_left_r1.blf",
+        ("channel 'ay' (message 'IMU', signal 'AccZ'): signal not in message 'IMU'",),
+    ),
+    "no_frames": (
+        _no_frames,
+        "park_in_left_r1.blf",
+        (
+            "channel 'steer_cmd' (message 'STR', signal 'StrWhlAngReq'): no frames of the "
+            "message (id 0x150)",
+        ),
+    ),
+    "non_monotonic": (
+        _non_monotonic,
+        "park_in_left_r1.blf",
+        ("channel 'vx' (message 'ESP', signal 'VehSpd'): non-monotonic time stamps",),
+    ),
+    "truncated_blf": (_truncated_blf, "park_in_left_r1.blf", ("truncated .blf log",)),
+    "truncated_asc": (_truncated_asc, "park_in_left_r1.asc", ("truncated .asc log",)),
+    "garbage_blf": (_garbage_blf, "park_in_left_r1.blf", ("not a readable .blf log",)),
+    "unmapped": (_unmapped, "park_in_left_r1.blf", ("channel 'ay': not mapped",)),
+    "short_frame": (
+        _short_frame,
+        "park_in_left_r1.blf",
+        (
+            "channel 'steer_cmd' (message 'STR', signal 'StrWhlAngReq'): frame at t=1.01",
+            "Wrong data size",
+        ),
+    ),
+    "column_mapping": (
+        _column_mapping,
+        "park_in_left_r1.blf",
+        (
+            "channel 'vx': the mapping gives column 'VehSpd'; a CAN log needs 'message' and "
+            "'signal'",
+        ),
+    ),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(MALFORMED))
+def test_malformed_can_log_gives_one_clear_line(kind, tmp_path, capsys):
+    case, fname, fragments = MALFORMED[kind]
+    src = tmp_path / "logs"
+    mapping = case(src)
+    with pytest.raises(ParknssError) as exc:  # the library
+        import_folder(src, mapping=mapping)
+    msg = str(exc.value)
+    assert "\n" not in msg and fname in msg, msg
+    for frag in fragments:
+        assert frag in msg, msg
+    out = tmp_path / "camp"  # the CLI
+    assert main(["campaign", "import", str(src), "--out", str(out), "--mapping", str(mapping)]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"parknss: error: {msg}\n", captured.err
+    assert captured.out == "" and not (out / "campaign.json").exists()
+
+
+def test_dbc_built_here_round_trips_through_cantools(tmp_path):
+    p = tmp_path / "v.dbc"
+    p.write_text(vehicle_dbc().as_dbc_string())
+    db = cantools.database.load_file(p)
+    gear = db.get_message_by_name("GEAR")
+    assert str(gear.decode(gear.encode({"GearPos": "R"}))["GearPos"]) == "R"
