@@ -48,7 +48,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Campaign folder to write."),
         mapping: Path | None = typer.Option(None, "--mapping", help="Channel-mapping YAML."),
     ) -> None:
-        """Turn a folder of real logs (.csv, .parquet, .mat) into a validated campaign."""
+        """Turn a folder of real logs (.csv, .parquet, .mat, .mf4, .blf/.asc) into a campaign."""
         from parknss.data.io import import_folder, write_campaign
 
         campaign = import_folder(src, mapping=mapping)

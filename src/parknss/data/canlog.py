@@ -55,8 +55,11 @@ def _load_dbc(path: Path, m: ChannelMapping) -> Any:
     dbc = Path(m.can.dbc)
     if not dbc.is_file():
         raise DataError(f"{path}: DBC file {dbc} not found (can.dbc in the mapping)")
-    import cantools
-
+    try:
+        import can  # noqa: F401  (python-can, used by _frames)
+        import cantools
+    except ImportError as exc:  # pinned dependencies; only a broken install lacks them
+        raise DataError(f"{path}: reading CAN logs needs cantools and python-can ({exc})") from exc
     try:
         db = cantools.database.load_file(dbc)
     except Exception as exc:  # cantools raises many types for bad files

@@ -59,7 +59,10 @@ def _quiet() -> Iterator[None]:
 
 def _open(path: Path) -> Any:
     """An asammdf MDF object, or DataError for an unreadable, corrupt or truncated file."""
-    from asammdf import MDF
+    try:
+        from asammdf import MDF
+    except ImportError as exc:  # a pinned dependency; only a broken install lacks it
+        raise DataError(f"{path}: reading MDF4 needs the package asammdf ({exc})") from exc
 
     problem = None
     with _quiet():
