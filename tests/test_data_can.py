@@ -20,7 +20,7 @@ from parknss.cli import main
 from parknss.config import CONFIG_DIR
 from parknss.data.io import import_folder, read_campaign, read_trial, write_trial
 from parknss.data.mapping import load_mapping
-from parknss.errors import DataError, ParknssError
+from parknss.errors import ConfigError, DataError, ParknssError
 from parknss.signals import DEG_PER_RAD, KMH_PER_MS, REQUIRED_CHANNELS
 
 EXAMPLE = CONFIG_DIR / "mapping_can_example.yaml"
@@ -419,3 +419,16 @@ def test_dbc_built_here_round_trips_through_cantools(tmp_path):
     db = cantools.database.load_file(p)
     gear = db.get_message_by_name("GEAR")
     assert str(gear.decode(gear.encode({"GearPos": "R"}))["GearPos"]) == "R"
+
+
+def test_can_sources_in_the_mapping_are_checked(tmp_path):
+    p = tmp_path / "m.yaml"
+    p.write_text("channels: {vx: {message: ESP}}\n")
+    with pytest.raises(ConfigError, match=r"channels\.vx.*needs both 'message' and 'signal'"):
+        load_mapping(p)
+    p.write_text("channels: {vx: {column: VehSpd, message: ESP, signal: VehSpd}}\n")
+    with pytest.raises(ConfigError, match=r"channels\.vx.*not both"):
+        load_mapping(p)
+    csv = write_trial(read_campaign("campaigns/default")[0], tmp_path / "park_in_left_r1.csv")
+    with pytest.raises(DataError, match=r"channel 'gear': the mapping gives a CAN message 'GEAR'"):
+        read_trial(csv, EXAMPLE)  # a CAN mapping on a CSV log

@@ -151,24 +151,30 @@ def _frames(path: Path, wanted: set[tuple[int, bool]], bus: int | None):
     return t0, frames
 
 
-def _decoded(src: _Source, frames: list, t0: float, path: Path) -> Series:
-    """The signal's values at its message's frame times (s from the first frame)."""
+def _decode_all(src: _Source, frames: list, t0: float, path: Path) -> list[tuple[float, dict]]:
+    """Every frame of the source's message decoded: (s from the first frame, signals)."""
     if not frames:
         raise DataError(
             f"{path}: {src.label}: no frames of the message (id 0x{src.frame_key[0]:X}) in the log"
         )
-    times, values = [], []
+    out = []
     for ts, data in frames:
         try:
-            decoded = src.message.decode(data, decode_choices=True, scaling=True)
+            out.append((ts - t0, src.message.decode(data, decode_choices=True, scaling=True)))
         except Exception as exc:  # cantools DecodeError, struct errors on short frames
             raise DataError(
                 f"{path}: {src.label}: frame at t={ts - t0:.6f} s cannot be decoded "
                 f"({_one_line(exc)})"
             ) from exc
-        if src.signal.name in decoded:  # multiplexed signals are absent from other frames
-            times.append(ts - t0)
-            values.append(decoded[src.signal.name])
+    return out
+
+
+def _decoded(src: _Source, decoded: list[tuple[float, dict]], path: Path) -> Series:
+    """The signal's values at its message's frame times (s from the first frame)."""
+    name = src.signal.name
+    # multiplexed signals are absent from the frames of other multiplexer values
+    times = [t for t, sigs in decoded if name in sigs]
+    values = [sigs[name] for _, sigs in decoded if name in sigs]
     if not values:
         raise DataError(f"{path}: {src.label}: no frame carries the signal")
     if all(isinstance(v, int | float) for v in values):
@@ -203,8 +209,11 @@ def read_can(path: Path, m: ChannelMapping) -> BusLog:
     t0, frames = _frames(path, {s.frame_key for s in sources}, m.can.bus_channel)
     taken: set[str] = {TIME_KEY}
     series = []
+    by_message: dict[tuple[int, bool], list[tuple[float, dict]]] = {}
     for src in sources:
-        s = _decoded(src, frames.get(src.frame_key, []), t0, path)
+        if src.frame_key not in by_message:  # decode each message's frames once
+            by_message[src.frame_key] = _decode_all(src, frames.get(src.frame_key, []), t0, path)
+        s = _decoded(src, by_message[src.frame_key], path)
         mode = m.channels[src.channel].interpolation
         hold = mode != "linear"  # CAN signals are event-based: held unless asked
         key = unique_key(s.key, s.channel, taken)
