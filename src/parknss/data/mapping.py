@@ -131,7 +131,8 @@ class CanOptions(StrictModel):
     """How CAN logs (.blf, .asc) are decoded (configs/mapping_can_example.yaml).
 
     Attributes:
-        dbc: the DBC file; a relative path is relative to the mapping YAML's folder.
+        dbc: the DBC file; a relative path is relative to the mapping YAML's folder
+            (to the working directory for a ChannelMapping built in code).
         bus_channel: only frames of this bus channel (python-can's 0-based number);
             None takes every channel.
         use_file_units: without a ``unit`` in the mapping, take the DBC signal's unit.
