@@ -26,7 +26,7 @@ REQUIRED = os.environ.get("PARKNSS_BROWSER_TESTS") == "1"
 CHROMIUM = os.environ.get("PARKNSS_CHROMIUM", "/usr/bin/chromium")
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking"]
 CELL = "26"
-TIMEOUT_MS = 90_000
+TIMEOUT_MS = 240_000  # generous: the machine may be loaded
 
 
 def _missing() -> str | None:
@@ -63,7 +63,12 @@ def server(tmp_path_factory):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    cfg = load_web_config(port=port, closed_loop_config=str(cfg_file), simulate_budget_s=60.0)
+    cfg = load_web_config(
+        port=port,
+        closed_loop_config=str(cfg_file),
+        plan_budget_s=300.0,
+        simulate_budget_s=600.0,
+    )
     srv = uvicorn.Server(
         uvicorn.Config(create_app(cfg), host="127.0.0.1", port=port, log_level="warning")
     )
@@ -94,7 +99,11 @@ def page(browser, server):
 
 
 def _settled(page) -> None:
-    page.wait_for_function("document.querySelector('#busy').hidden && state.plan !== null")
+    """Wait until the selected cell is planned and nothing is running."""
+    page.wait_for_function(
+        "document.querySelector('#busy').hidden && !state.planning && state.plan !== null && "
+        "state.plan.name === state.cells[state.index].name"
+    )
 
 
 def _pixels_like(page, selector: str, hex_colour: str, tol: int = 40) -> int:

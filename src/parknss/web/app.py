@@ -113,6 +113,8 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
         version=parknss.__version__,
         description="Plan a parking scene and execute it in closed loop through a plant.",
         lifespan=lifespan,
+        docs_url=None,  # Swagger UI and ReDoc load from a CDN; the page must work offline
+        redoc_url=None,
     )
     app.state.service = service
     app.state.runner = runner

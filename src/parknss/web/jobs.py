@@ -49,7 +49,10 @@ class ComputeRunner:
         try:
             return await asyncio.wait_for(asyncio.wrap_future(fut), budget_s)
         except TimeoutError as exc:
-            raise OverBudgetError(f"{what} exceeded the server's budget of {budget_s:g} s") from exc
+            raise OverBudgetError(
+                f"{what} exceeded the server's budget of {budget_s:g} s; it finishes in the "
+                "background (a plan is then cached), so retry in a while"
+            ) from exc
 
     def shutdown(self) -> None:
         """Stop taking work; running computations finish in the background."""

@@ -176,12 +176,18 @@ async function loadCells() {
 async function loadCell() {
   clearError();
   const tok = ++state.token;
+  state.plan = null;
+  state.planning = true;
+  renderPlanInfo();
   try {
     const doc = await api(`/api/scene?grid=${state.grid}&index=${state.index}`);
     if (tok !== state.token) return;
     setScene(doc.scene, false);
     await plan();
   } catch (err) {
+    if (tok !== state.token) return;
+    state.planning = false;
+    renderPlanInfo();
     showError(err.message);
   }
 }
