@@ -92,7 +92,7 @@ def page(browser, server):
     pg.console_errors = []
     pg.on("console", lambda m: m.type == "error" and pg.console_errors.append(m.text))
     pg.on("pageerror", lambda e: pg.console_errors.append(f"page error: {e}"))
-    pg.goto(server)
+    pg.goto(f"{server}?grid=36&cell={CELL}")
     pg.wait_for_selector(f"#cell option[value='{CELL}']", state="attached")
     yield pg
     ctx.close()
@@ -141,8 +141,7 @@ def _distinct_colours(page, selector: str) -> int:
 
 def test_a_kinematic_cell_runs_and_plays_back(page, tmp_path):
     _settled(page)
-    page.select_option("#cell", CELL)
-    _settled(page)
+    assert page.input_value("#cell") == CELL
     assert "planned" in page.inner_text("#plan-info")
     for kind in ("chain", "reference"):
         page.uncheck(f"#plant-{kind}")
@@ -172,8 +171,6 @@ def test_a_kinematic_cell_runs_and_plays_back(page, tmp_path):
 
 def test_dragging_the_start_replans_from_there(page):
     _settled(page)
-    page.select_option("#cell", CELL)
-    _settled(page)
     before = page.evaluate("state.start.slice()")
     box = page.locator("#view").bounding_box()
     x, y = page.evaluate("[sx(state.start[0] + 1.5), sy(state.start[1])]")
@@ -200,3 +197,25 @@ def test_an_unavailable_plant_shows_the_api_error(page):
     assert "chain" in page.inner_text("#error")
     assert "chain" in page.inner_text("#outcome tbody")
     assert not [e for e in page.console_errors if "page error" in e]
+
+
+def test_a_scene_file_and_the_robustness_grid_are_planned(page, tmp_path):
+    from parknss.sim.scenarios import grid_scene
+
+    _settled(page)
+    scene_file = tmp_path / "my_scene.json"
+    grid_scene(int(CELL)).save(scene_file)
+    page.set_input_files("#scene-file", str(scene_file))
+    page.wait_for_function(
+        "state.custom && document.querySelector('#busy').hidden && !state.planning && "
+        "state.plan !== null"
+    )
+    assert page.input_value("#cell") == "custom"
+    assert "planned" in page.inner_text("#plan-info")
+    page.select_option("#cell", CELL)  # back to the grid cell
+    page.select_option("#grid", "252")  # the same cell, first perturbation (skew +5°)
+    page.wait_for_function("state.cells.length === 252")
+    _settled(page)
+    assert page.evaluate("state.plan.name") == "angled-left-t1-open-skew_pos"
+    assert page.url.endswith(f"?grid=252&cell={CELL}")
+    assert page.console_errors == []

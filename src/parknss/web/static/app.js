@@ -182,6 +182,7 @@ async function loadCell() {
   try {
     const doc = await api(`/api/scene?grid=${state.grid}&index=${state.index}`);
     if (tok !== state.token) return;
+    writeAddress();
     setScene(doc.scene, false);
     await plan();
   } catch (err) {
@@ -999,8 +1000,9 @@ function saveScene() {
 
 function wire() {
   $("grid").addEventListener("change", async (ev) => {
+    // keep the base cell: robust index = 36 · variant + cell, so cell i <-> variant 0 of i
     state.grid = ev.target.value;
-    state.index = 0;
+    state.index = state.custom ? 0 : state.index % state.health.grids["36"];
     try {
       await loadCells();
       await loadCell();
@@ -1067,8 +1069,24 @@ function togglePlay() {
   updatePlayer();
 }
 
+// ?grid=36&cell=26 in the address picks the first scene; the address follows the choice.
+function readAddress() {
+  const q = new URLSearchParams(window.location.search);
+  const grid = q.get("grid");
+  if (grid === "36" || grid === "252") state.grid = grid;
+  const cell = Number(q.get("cell"));
+  if (q.has("cell") && Number.isInteger(cell) && cell >= 0) state.index = cell;
+  $("grid").value = state.grid;
+}
+
+function writeAddress() {
+  const q = new URLSearchParams({ grid: state.grid, cell: String(state.index) });
+  window.history.replaceState(null, "", `?${q}`);
+}
+
 async function main() {
   wire();
+  readAddress();
   renderPlots();
   await loadHealth();
   if (!state.health) return;
