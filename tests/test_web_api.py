@@ -298,3 +298,37 @@ def test_config_file_matches_the_defaults():
     from parknss.web.config import WebConfig
 
     assert load_web_config() == WebConfig()
+
+
+def test_the_web_command_serves_the_page_and_the_api():
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    import httpx
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cmd = [sys.executable, "-m", "parknss.cli", "web", "--no-open", "--port", str(port)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120.0
+        while True:
+            assert proc.poll() is None, proc.stderr.read()
+            try:
+                page = httpx.get(f"{base}/", timeout=5.0)
+                break
+            except httpx.TransportError:
+                assert time.monotonic() < deadline, "parknss web did not start"
+                time.sleep(0.25)
+        assert page.status_code == 200 and "closed-loop parking simulator" in page.text
+        assert httpx.get(f"{base}/static/app.js", timeout=5.0).status_code == 200
+        cells = httpx.get(f"{base}/api/cells", timeout=30.0).json()["cells"]
+        assert len(cells) == 36
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    assert f"http://127.0.0.1:{port}/" in proc.stderr.read()
