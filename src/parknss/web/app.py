@@ -121,8 +121,8 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
     _install_error_handlers(app)
 
     @app.get("/api/health", response_model=Health)
-    async def health() -> Health:
-        return await runner.run(cfg.plan_budget_s, "health check", service.health)
+    def health() -> Health:  # not queued behind long plans and runs
+        return service.health()
 
     @app.get("/api/cells", response_model=CellList, responses=_ERRORS)
     def cells(grid: Grid = "36") -> CellList:
