@@ -293,6 +293,10 @@ function clearRuns() {
   renderPlots();
 }
 
+function planTime(seconds) {
+  return seconds < 1 ? `${fmt(seconds * 1000, 0)} ms` : `${fmt(seconds, 1)} s`;
+}
+
 function fmt(v, digits) {
   return v === null || v === undefined ? "–" : Number(v).toFixed(digits);
 }
@@ -342,7 +346,7 @@ function renderPlanInfo() {
     ["path", p.plannable ? `${fmt(p.length_m, 2)} m, ${p.cusps} cusp${p.cusps === 1 ? "" : "s"}` : "–"],
     ["clearance", p.min_clearance_cm === null ? "–" : `${fmt(p.min_clearance_cm, 1)} cm`],
     ["stage", p.plannable ? (p.refined ? "Hybrid A* + refinement" : "Hybrid A* + Reeds-Shepp") : "–"],
-    ["plan time", `${fmt(p.plan_s * 1000, 0)} ms${p.cached ? " (cached)" : ""}`],
+    ["plan time", `${planTime(p.plan_s)}${p.cached ? " (cached)" : ""}`],
   ];
   for (const [k, v] of rows) {
     const dt = document.createElement("dt");
