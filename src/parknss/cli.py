@@ -33,6 +33,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "simulate",
     "web",
     "nss",
+    "study",
 )
 
 for _name in COMMAND_MODULES:

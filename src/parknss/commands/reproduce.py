@@ -21,16 +21,20 @@ def register(app: typer.Typer) -> None:
         address: str | None = typer.Option(None, "--address", help="Ray cluster address."),
         data: Path | None = typer.Option(None, "--data", help="Campaign folder."),
         out: Path | None = typer.Option(None, "--out", help="Run folder."),
+        config: Path | None = typer.Option(
+            None, "--config", help="Studies YAML (default configs/experiments.yaml)."
+        ),
         as_json: bool = typer.Option(False, "--json", help="Print the run summary as JSON."),
     ) -> None:
         """Reproduce the paper's tables and figures (on the synthetic campaign by default)."""
         from parknss.experiments.registry import RunContext, artefacts, get, git_revision
+        from parknss.nss.config import NSSConfig
         from parknss.report.html import write_report
 
         arts = artefacts()
         if list_:
             for art in arts.values():
-                typer.echo(f"{art.name:16s} {art.paper_ref:10s} {art.title}")
+                typer.echo(f"{art.name:16s} {art.title} ({art.paper_ref})")
             return
         chosen = list(arts.values()) if name == "all" else [get(name)]
         stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
@@ -44,6 +48,7 @@ def register(app: typer.Typer) -> None:
             address=address,
             data=data,
             cache_dir=out / "cache",
+            config=config,
         )
         sections = []
         for art in chosen:
@@ -60,6 +65,11 @@ def register(app: typer.Typer) -> None:
             "data": str(data or "bundled"),
             "git_revision": git_revision(),
             "created_utc": stamp,
+            "config": {
+                "experiments": ctx.experiments_config().model_dump(mode="json"),
+                "budget": "quick" if quick else "full",
+                "nss_base": NSSConfig().model_dump(mode="json"),
+            },
         }
         report = write_report(out / "report.html", "parknss reproduction report", sections, meta)
         summary = {

@@ -1,10 +1,16 @@
 """The registered artefacts of ``parknss reproduce``: one function per paper table/figure.
 
 Each function is small: it calls the study or evaluation code that does the work and turns
-its typed result into report tables, figures and findings.
+its typed result into report tables, figures and findings. The NSS studies share the run's
+executor settings and result cache (:meth:`RunContext.sweep`), so the seed-noise fits run
+once per run folder and every other study compares its effects against that floor.
+Artefacts of parts owned elsewhere (Table II / Fig. 5, Fig. 7, Table V / Figs. 8-9,
+Table IV / Figs. 3 and 6) are thin wrappers over those parts' public functions.
 """
 
 from __future__ import annotations
+
+import importlib.util
 
 from parknss.experiments.registry import ArtefactResult, RunContext, Table, register
 
@@ -45,3 +51,236 @@ def campaign_summary(ctx: RunContext) -> ArtefactResult:
     )
     fig = draw_trial(ctx.campaign()[0], ctx.out_dir / "campaign_trial.png")
     return ArtefactResult(tables=[checks, table], figures=[fig])
+
+
+# ---------------------------------------------------------------------------- NSS studies
+
+
+def seed_noise_result(ctx: RunContext):
+    """The run's seed-noise study (run once, shared by the artefacts through ctx.memo)."""
+    if "seed_noise" not in ctx.memo:
+        from parknss.experiments.noise import seed_noise
+
+        ctx.memo["seed_noise"] = seed_noise(ctx.experiments_config(), ctx.quick, ctx.sweep())
+    return ctx.memo["seed_noise"]
+
+
+@register("seed_noise", "Seed-noise floor", "§IV-B, §V-A")
+def seed_noise_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.findings import seed_noise_findings
+    from parknss.experiments.study_tables import seed_noise_tables
+    from parknss.report.study_figures import draw_seed_noise
+
+    res = seed_noise_result(ctx)
+    fig = draw_seed_noise(res, ctx.out_dir / "seed_noise.png")
+    return ArtefactResult(seed_noise_tables(res), [fig], seed_noise_findings(res))
+
+
+@register("learning_curve", "Learning curve (leave-r-repeats-out)", "§V-A, learning-curve fig.")
+def learning_curve_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.findings import learning_curve_findings
+    from parknss.experiments.learning_curve import learning_curve
+    from parknss.experiments.study_tables import learning_curve_tables
+    from parknss.report.study_figures import draw_learning_curve
+
+    res = learning_curve(ctx.experiments_config(), ctx.quick, ctx.sweep())
+    fig = draw_learning_curve(res, ctx.out_dir / "learning_curve.png")
+    return ArtefactResult(learning_curve_tables(res), [fig], learning_curve_findings(res))
+
+
+@register("table3", "Table III: design ablations", "§V-C, Table III")
+def table3_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.ablations import ablations
+    from parknss.experiments.findings import ablation_findings
+    from parknss.experiments.study_tables import ablation_tables
+    from parknss.report.study_figures import draw_ablations
+
+    floor = seed_noise_result(ctx).floor
+    res = ablations(ctx.experiments_config(), ctx.quick, ctx.sweep(), floor)
+    fig = draw_ablations(res, ctx.out_dir / "table3_effects.png")
+    notes = (
+        "Capacity: augmented latent states and residual + layer-norm state nets are not "
+        "implemented in parknss.nss; only smaller plain nets are compared."
+    )
+    return ArtefactResult(ablation_tables(res), [fig], ablation_findings(res), notes)
+
+
+@register("limiter", "Inference limiter study", "§V-B")
+def limiter_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.findings import limiter_findings
+    from parknss.experiments.limiter_study import limiter_study
+    from parknss.experiments.study_tables import limiter_tables
+    from parknss.report.study_figures import draw_limiter
+
+    floor = seed_noise_result(ctx).floor
+    res = limiter_study(ctx.experiments_config(), ctx.quick, ctx.sweep(), floor)
+    fig = draw_limiter(res, ctx.out_dir / "limiter.png")
+    return ArtefactResult(limiter_tables(res), [fig], limiter_findings(res))
+
+
+@register("fig4", "Fig. 4: convergence probe", "§IV-B, Fig. 4")
+def fig4_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.convergence import convergence
+    from parknss.experiments.study_tables import convergence_tables
+    from parknss.report.nss_figures import draw_history
+
+    res = convergence(ctx.experiments_config(), ctx.quick, ctx.sweep())
+    fig = draw_history(
+        res.epochs,
+        res.raw,
+        res.smooth,
+        ctx.out_dir / "fig4_convergence.png",
+        output=res.output,
+        best_epoch=res.best_epoch,
+    )
+    return ArtefactResult(convergence_tables(res), [fig])
+
+
+@register("table2", "Table II and Fig. 5: four-fold cross-validation", "§V-A, Table II, Fig. 5")
+def table2_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.config import merge_overrides
+    from parknss.experiments.cv import COLUMNS, run_cv
+    from parknss.nss.checkpoint import load_model
+    from parknss.nss.predict import predict_trials
+    from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
+
+    b = ctx.experiments_config().budget(ctx.quick)
+    ov = merge_overrides(b.overrides, {"train": {"epochs": b.convergence_epochs}})
+    models = ctx.out_dir / "cv_models"
+    res = run_cv(
+        data=str(ctx.data) if ctx.data else None,
+        overrides=ov,
+        executor=ctx.executor,
+        workers=ctx.workers,
+        address=ctx.address,
+        cache_dir=ctx.cache_dir,
+        save_dir=models,
+        progress=ctx.progress,
+    )
+    rows = []
+    for i, _ in enumerate(res.folds["nss"]):
+        rows.append([f"fold {i}", *(res.column("nss", k)[i] for k, _ in COLUMNS)])
+    for ref, tag in (("errors", ""), ("truth_errors", " vs truth")):
+        s = res.summary(ref)
+        for var in res.folds:
+            cells = [f"{s[var][k]['mean']:.4g} ± {s[var][k]['std']:.3g}" for k, _ in COLUMNS]
+            rows.append([f"{var}{tag} mean ± std", *cells])
+    table = Table(
+        "Table II: stratified 4-fold CV, moving region (paper NSS: 0.108 ± 0.038, "
+        "0.057 ± 0.012, 0.344 ± 0.170)",
+        ["", *(label for _, label in COLUMNS)],
+        rows,
+    )
+    figs = []
+    fold0 = res.folds["nss"][0]
+    model_dir = fold0.get("model_dir") or str(models / "nss_fold0")
+    campaign = ctx.campaign()
+    val = pick_maneuvers([campaign[i] for i in fold0["val"]])
+    pred = predict_trials(load_model(model_dir).model, val)
+    figs.append(
+        draw_rollouts(val, pred, ctx.out_dir / "fig5_rollouts.png", fold0.get("window_length"))
+    )
+    return ArtefactResult([table], figs)
+
+
+# ---------------------------------------------------------------- other parts' artefacts
+
+
+@register("fig7", "Fig. 7: ISO/TS 18571 ratings", "§V-F, Fig. 7")
+def fig7_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.commands.rate import run_rate
+    from parknss.config import SHIPPED_NSS
+
+    data = ctx.data or _campaign_dir(ctx)
+    tables, figs, notes = [], [], []
+    runs = [("truth replay (sensor-noise ceiling)", None, True)]
+    if (SHIPPED_NSS / "model.json").is_file():
+        runs.append((f"shipped NSS model ({SHIPPED_NSS.name})", SHIPPED_NSS, False))
+    else:
+        notes.append(f"no shipped NSS model at {SHIPPED_NSS}: only the truth replay is rated")
+    for label, model, replay in runs:
+        sub = ctx.out_dir / ("fig7_truth" if replay else "fig7_model")
+        doc = run_rate(data, model, replay, sub)
+        tab = doc.pop("_table")
+        s = tab.summary()
+        rows = [[c.channel, c.conditioning, c.n_trials, c.overall, c.grade] for c in s.channels]
+        rows.append(["mean", "raw / filtered", "", f"{s.mean_raw:.3f} / {s.mean_filtered:.3f}", ""])
+        tables.append(
+            Table(f"ISO/TS 18571 rating: {label}", ["channel", "cond", "n", "R", "grade"], rows)
+        )
+        figs.append(sub / "iso_rating.png")
+    return ArtefactResult(tables, figs, notes="; ".join(notes))
+
+
+def _campaign_dir(ctx: RunContext):
+    """A campaign folder for commands that read one (the default campaign written out)."""
+    from parknss.config import BUNDLED_CAMPAIGN
+
+    if (BUNDLED_CAMPAIGN / "campaign.json").is_file():
+        return BUNDLED_CAMPAIGN
+    from parknss.data.io import write_campaign
+
+    path = ctx.out_dir / "campaign"
+    if not (path / "campaign.json").is_file():
+        write_campaign(ctx.campaign(), path)
+    return path
+
+
+@register("table5", "Table V and Figs. 8-9: closed loop", "§V-G, Table V, Figs. 8-9")
+def table5_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.commands.simulate import grid_report, run_grid, simulate_scene
+    from parknss.errors import ParknssError
+    from parknss.sim.closed_loop import load_closed_loop_config
+    from parknss.sim.plants import make_plant
+    from parknss.sim.scenarios import N_CELLS
+
+    b = ctx.experiments_config().budget(ctx.quick)
+    cfg = load_closed_loop_config(None)
+    plants, notes = ["kinematic", "reference"], []
+    try:
+        make_plant("chain", vehicle_yaml=cfg.reference_vehicle, chain_path=cfg.chain_path)
+        plants.insert(1, "chain")
+    except ParknssError as exc:
+        notes.append(f"chain plant not run: {exc}")
+    cells = list(b.sim_cells) if b.sim_cells is not None else list(range(N_CELLS))
+    rows = run_grid("36", plants, cells, ctx.workers or 1, progress=ctx.progress)
+    doc = grid_report(rows, plants, "36", cfg.clearance_floor_cm)
+    keys = [
+        ("completed", "completed"),
+        ("plannable", "plannable"),
+        ("goal_mean_cm", "goal error mean [cm]"),
+        ("goal_median_cm", "goal error median [cm]"),
+        ("goal_max_cm", "goal error max [cm]"),
+        ("clearance_mean_cm", "driven clearance mean [cm]"),
+        ("under_floor", "cells under the clearance floor"),
+        ("collisions", "collisions"),
+        ("livelocks", "livelocks"),
+        ("timeouts", "timeouts"),
+        ("duration_mean_s", "duration mean [s]"),
+    ]
+    table = Table(
+        f"Table V: closed loop on {len(cells)} of {N_CELLS} grid cells",
+        ["", *plants],
+        [[label, *(doc["summary"][p][k] for p in plants)] for k, label in keys],
+    )
+    scene = simulate_scene(str(b.sim_scene), plants, ctx.out_dir)
+    figs = list((scene.get("figures") or {}).values())
+    if not figs:
+        notes.append(f"scene {b.sim_scene} is not plannable: no Figs. 8/9")
+    return ArtefactResult([table], figs, notes="; ".join(notes))
+
+
+@register("table4", "Table IV and Figs. 3, 6: actuator submodels", "§V-D, Table IV, Figs. 3, 6")
+def table4_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.findings import cotuning_finding
+
+    api = "parknss.actuators.study"
+    if importlib.util.find_spec(api) is None:
+        return ArtefactResult(
+            findings=[cotuning_finding()],
+            notes=f"the actuator study ({api}) is not available in this checkout yet",
+        )
+    return ArtefactResult(
+        findings=[cotuning_finding()],
+        notes=f"{api} exists but is not wired into reproduce yet",
+    )

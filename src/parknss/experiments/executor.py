@@ -168,6 +168,10 @@ def _run_ray(
     if started:
         env = {"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}}
         kwargs = {"address": address} if address else {"num_cpus": workers}
+        if not address:
+            # a local Ray starts its workers at niceness 15 by default, which starves them
+            # on a shared machine; run them at the driver's priority, like the local pool
+            os.environ.setdefault("RAY_worker_niceness", str(max(0, os.nice(0))))
         ray.init(include_dashboard=False, log_to_driver=False, runtime_env=env, **kwargs)
     try:
         remote = ray.remote(num_cpus=1)(execute)

@@ -31,13 +31,21 @@ class Table:
 class Finding:
     """One of the paper's findings beside what this toolkit measured.
 
-    ``agrees`` is True/False, or None where the comparison is not decidable (e.g. within
-    the seed-noise floor).
+    ``agrees`` is True/False, or None where the comparison is not decidable; then
+    ``undecided`` says why ("within noise", "not measured", ...).
     """
 
     claim: str
     measured: str
     agrees: bool | None
+    undecided: str = "within noise"
+
+    @property
+    def verdict(self) -> str:
+        """ "agrees", "differs" or the reason it is undecided."""
+        if self.agrees is None:
+            return self.undecided
+        return "agrees" if self.agrees else "differs"
 
 
 @dataclass
@@ -54,7 +62,9 @@ class RunContext:
     """What every artefact function receives.
 
     quick: tiny budgets for smoke tests; executor/workers/address: how sweeps run;
-    out_dir: where figures go; data: campaign folder or None for the bundled campaign.
+    out_dir: where figures go; data: campaign folder or None for the default campaign;
+    config: the studies' YAML (None: configs/experiments.yaml); memo: results shared
+    between artefacts of one run (the config, the measured noise floor).
     """
 
     out_dir: Path
@@ -65,16 +75,39 @@ class RunContext:
     data: Path | None = None
     seed: int = 0
     cache_dir: Path | None = None
+    progress: bool = True
+    config: Path | None = None
+    memo: dict[str, Any] = field(default_factory=dict)
     _campaign: Any = None
 
     def campaign(self):
-        """The campaign under study (loaded once)."""
+        """The campaign under study (loaded once; the default campaign when data is None)."""
         if self._campaign is None:
-            from parknss.config import BUNDLED_CAMPAIGN
-            from parknss.data.io import read_campaign
+            from parknss.nss.campaigns import load_campaign
 
-            self._campaign = read_campaign(self.data or BUNDLED_CAMPAIGN)
+            self._campaign = load_campaign(self.data)
         return self._campaign
+
+    def experiments_config(self):
+        """The studies' :class:`~parknss.experiments.config.ExperimentsConfig` (loaded once)."""
+        if "config" not in self.memo:
+            from parknss.experiments.config import load_experiments_config
+
+            self.memo["config"] = load_experiments_config(self.config)
+        return self.memo["config"]
+
+    def sweep(self):
+        """The executor settings of this run as a :class:`~parknss.experiments.sweep.Sweep`."""
+        from parknss.experiments.sweep import Sweep
+
+        return Sweep(
+            executor=self.executor,
+            workers=self.workers,
+            address=self.address,
+            cache_dir=self.cache_dir,
+            data=str(self.data) if self.data is not None else None,
+            progress=self.progress,
+        )
 
 
 @dataclass(frozen=True)

@@ -37,8 +37,8 @@ def _figure(path: Path) -> str:
 
 
 def _finding_row(f) -> str:
-    mark = {True: ("yes", "agrees"), False: ("no", "differs"), None: ("na", "undecided")}
-    cls, word = mark[f.agrees]
+    cls = {True: "yes", False: "no", None: "na"}[f.agrees]
+    word = f.verdict
     return (
         f"<tr><td>{html.escape(f.claim)}</td><td>{html.escape(f.measured)}</td>"
         f'<td class="{cls}">{word}</td></tr>'

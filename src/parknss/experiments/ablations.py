@@ -1,0 +1,227 @@
+"""Design ablations (paper §V-C, Table III): one factor varied per axis.
+
+Every option of every axis is fitted on the budget's CV folds at the matched epoch
+budget with the paper's configuration elsewhere; the table reports the fold-mean
+moving-region vx and ω_z errors, the mean wall clock per fit and, per option, its
+relative effect against the axis's deployed option and whether that effect exceeds the
+seed-noise floor. Axes marked ``lr_sweep`` (the loss) fit each option at every LR of the
+budget and report it at its best LR (by ``loss_lr_metric``, the held-out fold mean);
+axes marked ``cost`` (the integrator) also report the wall-clock ratio to the deployed
+option. Identical option configurations across axes are one cached job.
+
+Window rules resolve per fold from its training-trial lengths n_i: ``shortest`` =
+min n_i, ``longest`` = max n_i (every trial one padded sequence), ``padding:F`` = the
+smallest L whose tiling (:func:`parknss.data.windows.tile`) pads at least a fraction F of
+the sequence samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+from parknss.experiments.config import (
+    AblationAxis,
+    AblationOption,
+    Budget,
+    ExperimentsConfig,
+    Overrides,
+    merge_overrides,
+)
+from parknss.experiments.folds import make_fold
+from parknss.experiments.noise import NoiseFloor
+from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, nanmean, relative_effect
+
+
+def padding_fraction(lengths: list[int], L: int) -> float:
+    """Fraction of padded samples when trials of ``lengths`` are tiled into windows of L."""
+    total = pad = 0
+    for n in lengths:
+        windows = 1 if n <= L else math.ceil(n / L)
+        total += windows * L
+        pad += max(0, L - n)
+    return pad / total
+
+
+def resolve_window(rule: str, lengths: list[int]) -> int:
+    """The window length (samples) of a rule for training trials of ``lengths``."""
+    lo, hi = min(lengths), max(lengths)
+    if rule == "shortest":
+        return lo
+    if rule == "longest":
+        return hi
+    target = float(rule.partition(":")[2])
+    for L in range(lo, hi + 1):
+        if padding_fraction(lengths, L) >= target:
+            return L
+    return hi
+
+
+@dataclass
+class OptionResult:
+    """One option: per-fold scores at the chosen LR, and the LR sweep if any."""
+
+    axis: str
+    label: str
+    deployed: bool
+    scores: list[FoldScore]
+    windows: list[int] = field(default_factory=list)
+    lr: float | None = None
+    lr_sweep: dict[float, float] = field(default_factory=dict)  # lr -> fold-mean metric
+
+    def mean(self, channel: str) -> float:
+        return nanmean([getattr(s, channel) for s in self.scores])
+
+    def wall_s(self) -> float:
+        """Mean wall clock per fit, s."""
+        return nanmean([s.wall_s for s in self.scores])
+
+    def wall_per_epoch(self) -> float:
+        """Mean wall clock per epoch, s (the cost measure: independent of the epoch cap)."""
+        return nanmean([s.wall_per_epoch for s in self.scores])
+
+
+@dataclass
+class AxisResult:
+    name: str
+    options: list[OptionResult]
+    cost: bool
+
+    def baseline(self) -> OptionResult:
+        return next(o for o in self.options if o.deployed)
+
+    def effect(self, label: str, channel: str) -> float:
+        """Relative effect of an option against the deployed one."""
+        opt = next(o for o in self.options if o.label == label)
+        return relative_effect(opt.mean(channel), self.baseline().mean(channel))
+
+    def best(self, channel: str) -> OptionResult:
+        return min(self.options, key=lambda o: (math.isnan(o.mean(channel)), o.mean(channel)))
+
+    def cost_ratio(self, label: str) -> float:
+        """Wall clock per epoch of an option over the deployed option's."""
+        opt = next(o for o in self.options if o.label == label)
+        return relative_effect(opt.wall_per_epoch(), self.baseline().wall_per_epoch()) + 1.0
+
+
+@dataclass
+class AblationResult:
+    axes: list[AxisResult]
+    floor: NoiseFloor
+    epochs: int
+    folds: list[int]
+
+    def axis(self, name: str) -> AxisResult | None:
+        return next((a for a in self.axes if a.name == name), None)
+
+    def to_json(self) -> dict:
+        return {
+            "epochs": self.epochs,
+            "folds": self.folds,
+            "floor": self.floor.to_json(),
+            "axes": [
+                {
+                    "name": a.name,
+                    "options": [
+                        {
+                            **{k: v for k, v in asdict(o).items() if k != "lr_sweep"},
+                            "lr_sweep": {str(k): v for k, v in o.lr_sweep.items()},
+                        }
+                        for o in a.options
+                    ],
+                }
+                for a in self.axes
+            ],
+        }
+
+
+def option_overrides(opt: AblationOption, budget: Budget, quick: bool) -> Overrides:
+    own = opt.quick_overrides if quick and opt.quick_overrides is not None else opt.overrides
+    return merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs}}, own)
+
+
+def _base_lr(ov: Overrides) -> float:
+    """The LR a fit with these overrides uses (so the default LR adds no override)."""
+    from parknss.nss.config import TrainConfig
+
+    return float(ov.get("train", {}).get("lr", TrainConfig().lr))
+
+
+def _plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
+    """(axis, option, lr, fold, window, job) for every fit of the study."""
+    budget = cfg.budget(quick)
+    campaign = sweep.campaign()
+    lengths = {}
+    for k in budget.ablation_folds:
+        fold = make_fold(campaign, "cv", k)
+        lengths[k] = [campaign[i].n for i in fold.train]
+    plan = []
+    for axis in cfg.axes:
+        lrs: list[float | None] = list(budget.loss_lrs) if axis.lr_sweep else [None]
+        for opt in axis.options:
+            base = option_overrides(opt, budget, quick)
+            for lr in lrs:
+                for k in budget.ablation_folds:
+                    ov = merge_overrides(base)
+                    win = None
+                    if opt.window is not None:
+                        win = resolve_window(opt.window, lengths[k])
+                        # "shortest" is the default rule: then the job equals the baseline
+                        if opt.window != "shortest" or "window" in ov.get("data", {}):
+                            ov = merge_overrides(ov, {"data": {"window": win}})
+                    if lr is not None and lr != _base_lr(ov):
+                        ov = merge_overrides(ov, {"train": {"lr": lr}})
+                    job = fold_spec(sweep, "cv", k, ov, name=f"{axis.name}/{opt.label} f{k}")
+                    plan.append((axis, opt, lr, k, win, job))
+    return plan
+
+
+def n_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> int:
+    """Distinct fits of the study (shared configurations counted once)."""
+    return len({p[-1].key() for p in _plan(cfg, quick, sweep)})
+
+
+def _metric(res: dict, key: str) -> float:
+    v = res["errors"].get(key)
+    return math.nan if v is None else float(v)
+
+
+def _option(axis: AblationAxis, opt: AblationOption, rows, metric: str) -> OptionResult:
+    by_lr: dict = {}
+    for _, _, lr, _, win, res in rows:
+        by_lr.setdefault(lr, []).append((win, res))
+    sweep_means = {
+        lr: nanmean([_metric(r, metric) for _, r in items]) for lr, items in by_lr.items()
+    }
+    best_lr = min(sweep_means, key=lambda lr: (math.isnan(sweep_means[lr]), sweep_means[lr]))
+    chosen = by_lr[best_lr]
+    return OptionResult(
+        axis=axis.name,
+        label=opt.label,
+        deployed=opt.deployed,
+        scores=[FoldScore.from_json(r) for _, r in chosen],
+        windows=[w for w, _ in chosen if w is not None],
+        lr=best_lr,
+        lr_sweep={lr: v for lr, v in sweep_means.items() if lr is not None},
+    )
+
+
+def ablations(
+    cfg: ExperimentsConfig, quick: bool, sweep: Sweep, floor: NoiseFloor
+) -> AblationResult:
+    """Run every axis of ``cfg.axes`` (see the module doc)."""
+    budget = cfg.budget(quick)
+    plan = _plan(cfg, quick, sweep)
+    results = sweep.run([p[-1] for p in plan], "ablations")
+    axes = []
+    for axis in cfg.axes:
+        opts = []
+        for opt in axis.options:
+            rows = [
+                (*p[:-1], res)
+                for p, res in zip(plan, results, strict=True)
+                if p[0] is axis and p[1] is opt
+            ]
+            opts.append(_option(axis, opt, rows, cfg.loss_lr_metric))
+        axes.append(AxisResult(axis.name, opts, axis.cost))
+    return AblationResult(axes, floor, budget.epochs, list(budget.ablation_folds))

@@ -1,0 +1,139 @@
+"""Configuration of the evaluation studies (``configs/experiments.yaml``).
+
+Budgets (``full``: the paper's; ``quick``: a smoke test), the seed-noise and convergence
+splits, the learning-curve grid and the Table III ablation axes. Each axis option is a set
+of NSS config overrides (``{section: {field: value}}``, see
+:func:`parknss.nss.config.with_overrides`) and optionally a training-window rule.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator
+
+from parknss.config import CONFIG_DIR, StrictModel, load_config
+
+DEFAULT_YAML = CONFIG_DIR / "experiments.yaml"
+
+Overrides = dict[str, dict[str, Any]]
+
+
+class SplitRef(StrictModel):
+    """One fold of a split: ``split`` "cv" or "leave" (with ``r``), fold ``index``."""
+
+    split: Literal["cv", "leave"] = "cv"
+    index: int = Field(0, ge=0)
+    r: int = Field(1, ge=1)
+
+
+class Budget(StrictModel):
+    """How much compute a run of the studies spends."""
+
+    epochs: int = Field(3000, ge=1, description="epoch cap of every study fit")
+    convergence_epochs: int = Field(3200, ge=1, description="epoch cap of the Fig. 4 probe")
+    folds: list[int] = Field([0, 1, 2, 3], description="folds of each split")
+    ablation_folds: list[int] = Field([0, 1, 2, 3], description="CV folds per ablation option")
+    seeds: list[int] = Field([0, 1, 2, 3, 4], description="seeds of the noise-floor study")
+    loss_lrs: list[float] = Field([1e-3, 2e-3, 4e-3], description="LR sweep per loss")
+    sim_cells: list[int] | None = Field(None, description="Table V cells (None: all 36)")
+    sim_scene: int = Field(0, ge=0, description="grid cell drawn in Figs. 8/9")
+    overrides: Overrides = Field(default_factory=dict, description="NSS overrides, all fits")
+
+    @field_validator("folds", "ablation_folds", "seeds", "loss_lrs")
+    @classmethod
+    def _nonempty(cls, v: list) -> list:
+        if not v:
+            raise ValueError("must not be empty")
+        return v
+
+
+class AblationOption(StrictModel):
+    """One option of an axis: NSS overrides and/or a window rule."""
+
+    label: str
+    overrides: Overrides = Field(default_factory=dict)
+    quick_overrides: Overrides | None = Field(
+        None, description="replace `overrides` under --quick (None: same as full)"
+    )
+    window: str | None = Field(
+        None, description="shortest | longest | padding:F (fraction of padded samples)"
+    )
+    deployed: bool = Field(False, description="the option carried into the deployed model")
+
+    @field_validator("window")
+    @classmethod
+    def _window(cls, v: str | None) -> str | None:
+        if v is None or v in ("shortest", "longest"):
+            return v
+        head, _, frac = v.partition(":")
+        try:
+            ok = head == "padding" and 0.0 < float(frac) < 1.0
+        except ValueError:
+            ok = False
+        if not ok:
+            raise ValueError("window must be shortest, longest or padding:F with 0 < F < 1")
+        return v
+
+
+class AblationAxis(StrictModel):
+    """One row block of Table III."""
+
+    name: str
+    options: list[AblationOption]
+    lr_sweep: bool = Field(False, description="each option at its best LR of budget.loss_lrs")
+    cost: bool = Field(False, description="report wall-clock cost ratios")
+
+    @field_validator("options")
+    @classmethod
+    def _options(cls, v: list[AblationOption]) -> list[AblationOption]:
+        if len(v) < 2:
+            raise ValueError("an axis needs at least two options")
+        if sum(o.deployed for o in v) != 1:
+            raise ValueError("exactly one option of an axis must be marked deployed")
+        return v
+
+
+class ExperimentsConfig(StrictModel):
+    """Everything the studies need besides the NSS config itself."""
+
+    floor_z: float = Field(2.0, gt=0.0, description="effect beyond floor: |rel| > floor_z·CV")
+    max_floor: float = Field(
+        0.1, gt=0.0, description="a z·CV wider than this cannot confirm a claim of no effect"
+    )
+    paper_floor: dict[str, float] = Field(
+        default_factory=lambda: {"vx": 0.02, "yaw": 0.035},
+        description="the paper's seed CVs; used only where no floor was measured",
+    )
+    divergence_factor: float = Field(2.0, gt=1.0)
+    learning_curve_rs: list[int] = Field([1, 2, 3])
+    extrapolate_to: int = Field(16, ge=1, description="training trials of the all-16 model")
+    seed_noise_split: SplitRef = SplitRef(index=1)
+    convergence_split: SplitRef = SplitRef(index=0)
+    loss_lr_metric: str = "vx_mse_moving_kmh2"
+    full: Budget = Budget()
+    quick: Budget = Budget(epochs=4, convergence_epochs=8, folds=[0, 1], ablation_folds=[0])
+    axes: list[AblationAxis] = Field(default_factory=list)
+
+    def budget(self, quick: bool) -> Budget:
+        return self.quick if quick else self.full
+
+    def axis(self, name: str) -> AblationAxis | None:
+        return next((a for a in self.axes if a.name == name), None)
+
+
+def load_experiments_config(path: str | Path | None = None) -> ExperimentsConfig:
+    """The studies' config: ``path``, else configs/experiments.yaml, else the defaults."""
+    if path is None and DEFAULT_YAML.is_file():
+        path = DEFAULT_YAML
+    return load_config(ExperimentsConfig, path)
+
+
+def merge_overrides(*layers: Overrides | None) -> Overrides:
+    """Section-wise merge, later layers winning field by field."""
+    out: Overrides = {}
+    for layer in layers:
+        for sec, vals in (layer or {}).items():
+            out[sec] = {**out.get(sec, {}), **vals}
+    return out

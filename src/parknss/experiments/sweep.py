@@ -1,0 +1,147 @@
+"""What every NSS study shares: how its fold jobs are built, run and read back.
+
+A study is a list of :func:`parknss.experiments.folds.fold_job` jobs run through the
+executor (local pool, in-process or Ray; cached under the job hash, so an interrupted study
+resumes). :class:`Sweep` carries the executor settings and the campaign; :class:`FoldScore`
+is the slice of a fold's JSON result the studies tabulate (moving-region MSEs in the
+paper's units against the logged channels, and against the noise-free truth when the
+campaign is synthetic).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from parknss.experiments.config import Overrides
+from parknss.experiments.executor import Job, run_jobs
+
+FOLD_JOB = "parknss.experiments.folds:fold_job"
+
+
+@dataclass
+class Sweep:
+    """Executor settings and the campaign folder (None: the default campaign)."""
+
+    executor: str = "local"
+    workers: int | None = None
+    address: str | None = None
+    cache_dir: Path | None = None
+    data: str | None = None
+    progress: bool = True
+
+    def run(self, jobs: list[Job], desc: str) -> list[Any]:
+        """Results of ``jobs`` in order (cached jobs are read, not recomputed)."""
+        return run_jobs(
+            jobs,
+            executor=self.executor,
+            workers=self.workers,
+            cache_dir=self.cache_dir,
+            address=self.address,
+            progress=self.progress,
+            desc=desc,
+        )
+
+    def campaign(self):
+        from parknss.nss.campaigns import load_campaign
+
+        return load_campaign(self.data)
+
+
+def canonical_overrides(overrides: Overrides) -> Overrides:
+    """The overrides as the minimal difference from the NSS defaults.
+
+    Two spellings of one configuration (e.g. ``{"model": {"residual_yaw": True}}`` and
+    ``{}``) give the same job, so the executor's cache computes it once.
+    """
+    from parknss.nss.config import NSSConfig, with_overrides
+
+    default = NSSConfig().model_dump(mode="json")
+    doc = with_overrides(NSSConfig(), **overrides).model_dump(mode="json")
+    out: Overrides = {}
+    for sec, vals in doc.items():
+        diff = {k: v for k, v in vals.items() if v != default[sec][k]}
+        if diff:
+            out[sec] = diff
+    return out
+
+
+def fold_spec(
+    sweep: Sweep,
+    split: str,
+    index: int,
+    overrides: Overrides,
+    r: int = 1,
+    name: str = "",
+    fn: str = FOLD_JOB,
+    **extra: Any,
+) -> Job:
+    """A fold job (or a job of ``fn`` with the same arguments plus ``extra``); the overrides
+    are canonicalised (:func:`canonical_overrides`)."""
+    kwargs: dict[str, Any] = {
+        "split": split,
+        "index": index,
+        "r": r,
+        "model": "nss",
+        "data": sweep.data,
+        "overrides": canonical_overrides(overrides),
+        **extra,
+    }
+    return Job(fn, kwargs, name or f"{split} r{r} fold{index}")
+
+
+def _num(v: Any) -> float:
+    return math.nan if v is None else float(v)
+
+
+@dataclass
+class FoldScore:
+    """Moving-region errors of one fold: vx (km/h)², yaw (°/s)²; wall time s."""
+
+    vx: float
+    vx_reverse: float
+    yaw: float
+    vx_truth: float
+    yaw_truth: float
+    wall_s: float
+    best_epoch: int | None
+    n_train: int
+    epochs: int | None = None
+
+    @property
+    def wall_per_epoch(self) -> float:
+        """Wall clock per epoch, s (validation included); NaN without an epoch count."""
+        return self.wall_s / self.epochs if self.epochs else math.nan
+
+    @classmethod
+    def from_json(cls, res: dict) -> FoldScore:
+        e, t = res["errors"], res.get("truth_errors") or {}
+        return cls(
+            vx=_num(e["vx_mse_moving_kmh2"]),
+            vx_reverse=_num(e["vx_mse_reverse_kmh2"]),
+            yaw=_num(e["yaw_mse_moving_degs2"]),
+            vx_truth=_num(t.get("vx_mse_moving_kmh2")),
+            yaw_truth=_num(t.get("yaw_mse_moving_degs2")),
+            wall_s=float(res["wall_s"]),
+            best_epoch=res.get("best_epoch"),
+            n_train=len(res["train"]),
+            epochs=res.get("epochs"),
+        )
+
+
+def nanmean(values: list[float]) -> float:
+    """Mean ignoring NaN (NaN when nothing is finite)."""
+    a = np.asarray(values, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if a.size else math.nan
+
+
+def relative_effect(value: float, baseline: float) -> float:
+    """(value - baseline) / baseline; NaN when undefined."""
+    if not (math.isfinite(value) and math.isfinite(baseline)) or baseline == 0.0:
+        return math.nan
+    return (value - baseline) / baseline

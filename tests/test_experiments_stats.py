@@ -1,0 +1,115 @@
+"""The studies' arithmetic: power law, coefficient of variation, noise floor, windows."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from parknss.errors import ConfigError, DataError
+from parknss.experiments.ablations import padding_fraction, resolve_window
+from parknss.experiments.config import (
+    AblationAxis,
+    ExperimentsConfig,
+    load_experiments_config,
+    merge_overrides,
+)
+from parknss.experiments.learning_curve import fit_power_law
+from parknss.experiments.noise import NoiseFloor, coefficient_of_variation
+from parknss.experiments.sweep import relative_effect
+
+
+def test_power_law_recovers_exact_coefficients():
+    n = np.array([4.0, 8.0, 12.0])
+    e = 0.9 * n**-0.75
+    fit = fit_power_law(n, e)
+    assert fit.a == pytest.approx(0.9, rel=1e-10)
+    assert fit.b == pytest.approx(0.75, rel=1e-10)
+    assert float(fit(16)) == pytest.approx(0.9 * 16**-0.75, rel=1e-10)
+
+
+def test_power_law_of_rising_errors_has_negative_exponent():
+    fit = fit_power_law([4, 8, 12], [0.1, 0.2, 0.3])
+    assert fit.b < 0
+
+
+def test_power_law_needs_two_sizes():
+    with pytest.raises(DataError):
+        fit_power_law([12, 12], [0.1, 0.2])
+    with pytest.raises(DataError):
+        fit_power_law([4, 8], [0.1, -1.0])
+
+
+def test_cv_of_constant_errors_is_zero_and_matches_numpy():
+    assert coefficient_of_variation([0.2, 0.2, 0.2]) == 0.0
+    x = [0.089, 0.070, 0.108, 0.095]
+    ref = np.std(x, ddof=1) / np.mean(x)
+    assert coefficient_of_variation(x) == pytest.approx(ref, rel=1e-12)
+    assert math.isnan(coefficient_of_variation([0.1]))
+    assert math.isnan(coefficient_of_variation([0.1, float("nan")]))
+
+
+def test_noise_floor_verdicts():
+    fl = NoiseFloor(vx=0.02, yaw=0.035, n_seeds=5, source="measured", z=2.0, max_threshold=0.1)
+    assert fl.threshold("vx") == pytest.approx(0.04)
+    assert fl.exceeds(0.27, "vx") is True
+    assert fl.exceeds(-0.03, "vx") is False
+    assert fl.exceeds(float("nan"), "vx") is None
+    assert fl.confirms_null(0.01, "yaw") is True
+    assert fl.confirms_null(0.5, "yaw") is False
+    wide = NoiseFloor(vx=0.5, yaw=0.5, n_seeds=3, source="measured", z=2.0, max_threshold=0.1)
+    assert wide.confirms_null(0.01, "vx") is None  # too wide to confirm "no effect"
+    assert NoiseFloor.from_json(fl.to_json()) == fl
+
+
+def test_relative_effect():
+    assert relative_effect(0.127, 0.1) == pytest.approx(0.27)
+    assert math.isnan(relative_effect(0.1, 0.0))
+
+
+def test_window_rules():
+    lengths = [100, 150, 200]
+    assert resolve_window("shortest", lengths) == 100
+    assert resolve_window("longest", lengths) == 200
+    # at L = 200 every trial is one sequence: padding (100 + 50) / 600
+    assert padding_fraction(lengths, 200) == pytest.approx(0.25)
+    assert padding_fraction(lengths, 100) == 0.0
+    L = resolve_window("padding:0.10", lengths)
+    assert padding_fraction(lengths, L) >= 0.10 > padding_fraction(lengths, L - 1)
+
+
+def test_merge_overrides_is_fieldwise():
+    out = merge_overrides({"train": {"epochs": 3, "lr": 1e-3}}, None, {"train": {"lr": 2e-3}})
+    assert out == {"train": {"epochs": 3, "lr": 2e-3}}
+
+
+def test_config_rejects_bad_axes(tmp_path):
+    with pytest.raises(ValueError, match="deployed"):
+        AblationAxis(name="x", options=[{"label": "a"}, {"label": "b"}])
+    with pytest.raises(ValueError, match="window"):
+        AblationAxis(
+            name="x",
+            options=[{"label": "a", "deployed": True}, {"label": "b", "window": "padding:2"}],
+        )
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("floor_z: -1\n")
+    with pytest.raises(ConfigError, match="floor_z"):
+        load_experiments_config(bad)
+
+
+def test_shipped_config_has_the_paper_budget_and_axes():
+    cfg = load_experiments_config()
+    assert isinstance(cfg, ExperimentsConfig)
+    assert cfg.full.epochs == 3000 and cfg.full.convergence_epochs == 3200
+    assert cfg.learning_curve_rs == [1, 2, 3]
+    names = {a.name for a in cfg.axes}
+    assert {
+        "normalization",
+        "loss",
+        "lr schedule",
+        "training window",
+        "yaw readout",
+        "integrator",
+        "capacity",
+    } <= names
