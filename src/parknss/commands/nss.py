@@ -224,10 +224,10 @@ def register(app: typer.Typer) -> None:
         if chain is not None:
             if model is not None or limiter:
                 raise ConfigError("--chain cannot be combined with --model or --limiter")
-            from parknss.chain import load_chain, predict_chain_trials
+            from parknss.chain import load_chain
 
             source = str(chain)
-            predictions = predict_chain_trials(load_chain(chain), trials)
+            predictions = load_chain(chain).predict_trials(trials)
             horizon = None
         else:
             loaded = load_model(model or SHIPPED_NSS)
