@@ -3,6 +3,9 @@
 ``parknss rate --model M --data D`` predicts vx, yaw rate, ax and ay of every trial of
 the campaign folder D with the model M (through ``parknss.nss.predict``) and rates each
 against the logged channel, raw and after the identical 5 Hz zero-phase low-pass.
+``parknss rate --chain C --data D`` rates the command-to-vehicle chain artefact C (e.g.
+the shipped ``models/chain``) instead, rolled out from the logged commands
+(``parknss.chain.predict_chain_campaign``), the paper's Fig. 7 setting.
 ``parknss rate --replay-truth --data D`` instead rates a synthetic campaign's noise-free
 ``truth_*`` channels against the logged ones: the rating a perfect model would get, the
 ceiling set by sensor noise, offsets and the wheel-speed blind zone.
@@ -69,6 +72,7 @@ def run_rate(
     replay_truth: bool,
     out: Path,
     config: Path | None = None,
+    chain: Path | None = None,
 ) -> dict:
     """Rate, write the CSV, JSON and figure; return the JSON document."""
     from parknss.config import load_config
@@ -76,13 +80,20 @@ def run_rate(
     from parknss.metrics.rating_report import RateConfig, rate_campaign
     from parknss.report.iso_figure import draw_iso_boxplot
 
-    if replay_truth == (model is not None):
-        raise ParknssError("give exactly one of --model M or --replay-truth")
+    if int(replay_truth) + (model is not None) + (chain is not None) != 1:
+        raise ParknssError("give exactly one of --model M, --chain C or --replay-truth")
     cfg = load_config(RateConfig, config)
     campaign = read_campaign(data)
     if replay_truth:
         pairs = truth_pairs(campaign, cfg.channels)
         source = {"mode": "replay-truth", "data": str(data)}
+    elif chain is not None:
+        from parknss.chain import predict_chain_campaign
+
+        _log(f"predicting {len(campaign)} trials with the chain {chain}")
+        predictions = predict_chain_campaign(chain, campaign)
+        pairs = model_pairs(campaign, predictions, cfg.channels, chain)
+        source = {"mode": "chain", "chain": str(chain), "data": str(data)}
     else:
         predict_campaign = load_predictor()
         if not Path(model).exists():
@@ -111,6 +122,9 @@ def register(app: typer.Typer) -> None:
     def rate(
         data: Path = typer.Option(..., "--data", help="Campaign folder (campaign.json)."),
         model: Path | None = typer.Option(None, "--model", help="Model checkpoint to rate."),
+        chain: Path | None = typer.Option(
+            None, "--chain", help="Chain artefact to rate from the commands (models/chain)."
+        ),
         replay_truth: bool = typer.Option(
             False, "--replay-truth", help="Rate the truth_* channels (sensor-noise ceiling)."
         ),
@@ -119,7 +133,7 @@ def register(app: typer.Typer) -> None:
         config: Path | None = typer.Option(None, "--config", help="Rating YAML (RateConfig)."),
     ) -> None:
         """ISO/TS 18571 rating of vx, yaw rate, ax, ay per trial, raw and 5 Hz filtered."""
-        doc = run_rate(data, model, replay_truth, out, config)
+        doc = run_rate(data, model, replay_truth, out, config, chain)
         table = doc.pop("_table")
         if as_json:
             typer.echo(json.dumps(doc, indent=2))

@@ -1,0 +1,1 @@
+"""Per-channel actuator submodels, envelopes, two-phase selection and co-tuning (§III, §V-E)."""

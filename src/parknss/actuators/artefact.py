@@ -1,0 +1,182 @@
+"""The chain artefact: one folder, safetensors weights + JSON, never pickle.
+
+Layout::
+
+    chain.json              format, schema version, envelope, per-channel candidate
+                            (spec, scaling, structure config), weights SHA-256 and shapes,
+                            the NSS's SHA-256, and the build's metadata (selection,
+                            co-tuning, data hash, timings)
+    actuators.safetensors   the three submodels' weights ("drive.k", "brake.net.0.weight")
+    nss/                    the frozen NSS in its own format (parknss.nss.checkpoint)
+
+:func:`read_chain` refuses, with one-line :class:`~parknss.errors.CheckpointError`s, a
+missing folder or file, malformed JSON, another format or schema version, a missing
+channel, a hash mismatch (corrupt or truncated weights, or an NSS swapped underneath),
+and weights whose names or shapes do not fit the recorded candidates.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from pydantic import ValidationError
+from safetensors.torch import load_file
+
+from parknss.actuators.config import ArchConfig
+from parknss.actuators.envelopes import Envelope
+from parknss.actuators.models import Scaling, build_candidate
+from parknss.actuators.spec import CHANNELS, CandidateSpec
+from parknss.errors import CheckpointError, ConfigError
+from parknss.nss.checkpoint import (
+    atomic_save_tensors,
+    atomic_write_text,
+    git_revision,
+    load_model,
+    save_model,
+    sha256_file,
+)
+from parknss.nss.config import NSSConfig
+from parknss.signals import SCHEMA_VERSION
+
+FORMAT = "parknss-chain"
+FORMAT_VERSION = 1
+META = "chain.json"
+WEIGHTS = "actuators.safetensors"
+NSS_DIR = "nss"
+
+
+def write_chain(folder: str | Path, chain, meta: dict) -> Path:
+    """Write ``chain`` (a :class:`parknss.chain.Chain` with all three submodels)."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    missing = [c for c in CHANNELS if chain.model(c) is None]
+    if missing:
+        raise CheckpointError(f"{out}: a deployed chain needs all submodels; {missing} measured")
+    cfg = getattr(chain, "nss_config", None)
+    if not isinstance(cfg, NSSConfig):
+        raise CheckpointError(f"{out}: the chain carries no NSS config (set chain.nss_config)")
+    save_model(out / NSS_DIR, chain.nss, cfg, getattr(chain, "nss_training", {}))
+    tensors, channels = {}, {}
+    for ch in CHANNELS:
+        m = chain.model(ch)
+        for k, v in m.state_dict().items():
+            tensors[f"{ch}.{k}"] = v.detach().to(torch.float64)
+        channels[ch] = {
+            "spec": m.spec.name,
+            "scaling": m.scaling.to_json(),
+            "arch": m.cfg.model_dump(mode="json"),
+        }
+    atomic_save_tensors(tensors, out / WEIGHTS)
+    doc = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "schema_version": SCHEMA_VERSION,
+        "envelope": chain.envelope.to_json(),
+        "channels": channels,
+        "weights": {
+            "file": WEIGHTS,
+            "sha256": sha256_file(out / WEIGHTS),
+            "shapes": {k: list(v.shape) for k, v in tensors.items()},
+        },
+        "nss": {"folder": NSS_DIR, "sha256": sha256_file(out / NSS_DIR / "model.safetensors")},
+        "build": {"git_revision": git_revision(), **meta},
+    }
+    atomic_write_text(out / META, json.dumps(doc, indent=2))
+    return out
+
+
+def _read_meta(folder: Path) -> dict:
+    if not folder.is_dir():
+        raise CheckpointError(f"{folder}: chain folder not found")
+    src = folder / META
+    if not src.is_file():
+        raise CheckpointError(f"{src}: chain file not found")
+    try:
+        doc = json.loads(src.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{src}: malformed JSON ({exc.__class__.__name__})") from exc
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise CheckpointError(f"{src}: not a parknss chain (format {doc.get('format')!r})")
+    if doc.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(f"{src}: chain format version {doc.get('format_version')!r}, "
+                              f"this parknss reads {FORMAT_VERSION}")
+    if doc.get("schema_version") != SCHEMA_VERSION:
+        raise CheckpointError(f"{src}: channel schema version {doc.get('schema_version')!r} "
+                              f"does not match this parknss ({SCHEMA_VERSION!r})")
+    return doc
+
+
+def _build_models(doc: dict, src: Path) -> dict:
+    chans = doc.get("channels")
+    if not isinstance(chans, dict):
+        raise CheckpointError(f"{src}: no channels entry")
+    models = {}
+    for ch in CHANNELS:
+        d = chans.get(ch)
+        if not isinstance(d, dict):
+            raise CheckpointError(f"{src}: channel {ch!r} missing")
+        try:
+            spec = CandidateSpec.parse(str(d["spec"]))
+            arch = ArchConfig.model_validate(d["arch"])
+            scaling = Scaling.from_json(d["scaling"])
+        except (KeyError, TypeError, ValueError, ValidationError, ConfigError) as exc:
+            raise CheckpointError(f"{src}: channel {ch!r}: invalid entry ({exc})") from exc
+        if spec.channel != ch:
+            raise CheckpointError(f"{src}: channel {ch!r} holds a {spec.channel} candidate")
+        torch.manual_seed(0)
+        models[ch] = build_candidate(spec, scaling, arch)
+    return models
+
+
+def _load_weights(doc: dict, folder: Path, models: dict) -> None:
+    w = doc.get("weights")
+    if not isinstance(w, dict) or "sha256" not in w:
+        raise CheckpointError(f"{folder / META}: no weights entry")
+    wpath = folder / str(w.get("file", WEIGHTS))
+    if not wpath.is_file():
+        raise CheckpointError(f"{wpath}: weights file not found")
+    if sha256_file(wpath) != w["sha256"]:
+        raise CheckpointError(f"{wpath}: weights are corrupt or truncated (SHA-256 mismatch)")
+    try:
+        tensors = load_file(str(wpath))
+    except Exception as exc:  # safetensors raises its own error types
+        raise CheckpointError(f"{wpath}: unreadable safetensors file ({exc})") from exc
+    for ch, m in models.items():
+        want = {k: tuple(v.shape) for k, v in m.state_dict().items()}
+        have = {k[len(ch) + 1 :]: v for k, v in tensors.items() if k.startswith(ch + ".")}
+        for k in sorted(set(want) | set(have)):
+            if k not in have:
+                raise CheckpointError(f"{wpath}: weights lack {ch}.{k} (shape {want[k]})")
+            if k not in want:
+                raise CheckpointError(f"{wpath}: unexpected weight {ch}.{k}")
+            if tuple(have[k].shape) != want[k]:
+                raise CheckpointError(f"{wpath}: weight {ch}.{k} has shape "
+                                      f"{tuple(have[k].shape)}, the candidate needs {want[k]}")
+        m.load_state_dict(have)
+        m.eval()
+        m.requires_grad_(False)
+
+
+def read_chain(path: str | Path):
+    """(Chain, build metadata, folder) from an artefact folder."""
+    from parknss.chain import Chain
+
+    folder = Path(path)
+    doc = _read_meta(folder)
+    src = folder / META
+    nss_dir = folder / NSS_DIR
+    nss_w = nss_dir / "model.safetensors"
+    if not nss_w.is_file():
+        raise CheckpointError(f"{nss_w}: NSS weights file not found")
+    if sha256_file(nss_w) != (doc.get("nss") or {}).get("sha256"):
+        raise CheckpointError(f"{nss_w}: NSS weights do not match the chain (SHA-256 mismatch)")
+    loaded = load_model(nss_dir)
+    env = Envelope.from_json(doc.get("envelope") or {})
+    models = _build_models(doc, src)
+    _load_weights(doc, folder, models)
+    chain = Chain(loaded.model, models, env)
+    chain.nss_config = loaded.config
+    chain.nss_training = loaded.training
+    return chain, dict(doc.get("build") or {}), folder

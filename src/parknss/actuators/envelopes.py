@@ -1,0 +1,206 @@
+"""Physical input-output envelopes of the chain (paper §III-B).
+
+Input side, on the commands before the submodels:
+
+* a non-finite command is handled by one documented rule: NaN holds the channel's last
+  clean command (at the start: the rest command, torque 0, decel 0, steering the initial
+  angle); +inf/-inf are clamped to the domain bound they point at. NaN and inf never
+  reach a submodel, so states never become NaN. The gear passes through unclamped
+  (NaN gear: hold the last gear).
+* every command is clamped to its identified domain: decel_cmd to [-0.8, 0] m/s² by
+  default (paper), torque_cmd and steer_cmd to the range seen in the data, the latter
+  also within the steering lock.
+
+Output side, on the submodel outputs (never on measured channels): torque and pressure
+are held at their floors (>= 0), the steering angle is rate-limited to just above the
+highest slew rate in the data (so the guard only acts on out-of-domain requests), then
+held within the lock ±400°.
+
+:class:`Envelope` holds the numbers (saved in the chain artefact); :class:`EnvelopeState`
+applies them one sample at a time (real time) and counts which envelope acted;
+:func:`clean_commands` and :func:`limit_outputs_torch` are the batched equivalents.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from parknss.actuators.config import EnvelopeConfig
+from parknss.data.trial import Trial
+from parknss.errors import CheckpointError, DataError
+from parknss.signals import DT
+
+CMD_NAMES: tuple[str, ...] = ("torque_cmd", "decel_cmd", "steer_cmd")
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """Command domains [lo, hi] per command channel, output floors, lock (deg), rate (deg/s)."""
+
+    cmd_lo: tuple[float, float, float]
+    cmd_hi: tuple[float, float, float]
+    torque_floor: float = 0.0
+    pressure_floor: float = 0.0
+    steer_lock: float = 400.0
+    steer_rate_dps: float = 1.0e9
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> Envelope:
+        try:
+            return cls(
+                tuple(map(float, d["cmd_lo"])), tuple(map(float, d["cmd_hi"])),
+                float(d["torque_floor"]), float(d["pressure_floor"]),
+                float(d["steer_lock"]), float(d["steer_rate_dps"]),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise CheckpointError(f"invalid envelope ({exc})") from exc
+
+
+def identify_envelope(trials: Sequence[Trial], cfg: EnvelopeConfig) -> Envelope:
+    """Domains and the steering rate limit from the logged commands and actuals."""
+    if not trials:
+        raise DataError("no trials to identify the envelopes from")
+
+    def span(ch: str) -> tuple[float, float]:
+        x = np.concatenate([tr[ch] for tr in trials])
+        return float(np.min(x)), float(np.max(x))
+
+    t_lo, t_hi = cfg.torque_domain_nm or span("torque_cmd")
+    s_lo, s_hi = cfg.steer_domain_deg or span("steer_cmd")
+    lock = cfg.steer_lock_deg
+    s_lo, s_hi = max(s_lo, -lock), min(s_hi, lock)
+    d_lo, d_hi = cfg.decel_domain_ms2
+    slew = max(float(np.max(np.abs(np.diff(tr["steer"])))) / DT for tr in trials if tr.n > 1)
+    return Envelope(
+        (t_lo, d_lo, s_lo), (t_hi, d_hi, s_hi), cfg.torque_floor_nm, cfg.pressure_floor_bar,
+        lock, cfg.steer_rate_margin * slew,
+    )
+
+
+@dataclass
+class Activity:
+    """How often each envelope acted (samples), per channel."""
+
+    nonfinite: dict[str, int] = field(default_factory=lambda: dict.fromkeys(CMD_NAMES, 0))
+    input_clamp: dict[str, int] = field(default_factory=lambda: dict.fromkeys(CMD_NAMES, 0))
+    output_floor: dict[str, int] = field(default_factory=lambda: {"torque": 0, "brake_pressure": 0})
+    steer_rate: int = 0
+    steer_lock: int = 0
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    def active(self) -> list[str]:
+        """Names of the envelopes that acted at least once."""
+        out = [f"nonfinite:{k}" for k, v in self.nonfinite.items() if v]
+        out += [f"input_clamp:{k}" for k, v in self.input_clamp.items() if v]
+        out += [f"output_floor:{k}" for k, v in self.output_floor.items() if v]
+        out += ["steer_rate"] * bool(self.steer_rate) + ["steer_lock"] * bool(self.steer_lock)
+        return out
+
+
+class EnvelopeState:
+    """The envelopes applied sample by sample (real time), with activity counters."""
+
+    def __init__(self, env: Envelope) -> None:
+        self.env = env
+        self.activity = Activity()
+        self.reset()
+
+    def reset(self, steer: float = 0.0, gear: float = 0.0) -> None:
+        self.last = [0.0, 0.0, float(steer)]
+        self.gear = float(gear)
+        self.steer_prev = float(steer)
+
+    def command(self, gear: float, cmds: Sequence[float]) -> tuple[float, list[float]]:
+        """Clean (gear, [torque_cmd, decel_cmd, steer_cmd]) of one sample."""
+        if math.isfinite(gear):
+            self.gear = gear
+        out = []
+        for i, c in enumerate(cmds):
+            name = CMD_NAMES[i]
+            if math.isnan(c):
+                self.activity.nonfinite[name] += 1
+                c = self.last[i]
+            elif math.isinf(c):
+                self.activity.nonfinite[name] += 1
+            lo, hi = self.env.cmd_lo[i], self.env.cmd_hi[i]
+            if c < lo or c > hi:
+                self.activity.input_clamp[name] += 1
+                c = lo if c < lo else hi
+            self.last[i] = c
+            out.append(c)
+        return self.gear, out
+
+    def output(self, torque: float, pressure: float, steer: float) -> tuple[float, float, float]:
+        """Floors, steering rate limit and lock on one sample of submodel outputs."""
+        e = self.env
+        if torque < e.torque_floor:
+            self.activity.output_floor["torque"] += 1
+            torque = e.torque_floor
+        if pressure < e.pressure_floor:
+            self.activity.output_floor["brake_pressure"] += 1
+            pressure = e.pressure_floor
+        step = e.steer_rate_dps * DT
+        lo, hi = self.steer_prev - step, self.steer_prev + step
+        if steer < lo or steer > hi:
+            self.activity.steer_rate += 1
+            steer = lo if steer < lo else hi
+        if abs(steer) > e.steer_lock:
+            self.activity.steer_lock += 1
+            steer = math.copysign(e.steer_lock, steer)
+        self.steer_prev = steer
+        return torque, pressure, steer
+
+
+def clean_commands(env: Envelope, cmds: np.ndarray, steer0: np.ndarray | None = None) -> np.ndarray:
+    """The input envelope over command histories (B, T, 4) [gear, torque, decel, steer].
+
+    Same rule as :meth:`EnvelopeState.command`; steer0 (B,) is the NaN fill before the
+    first clean steering command (default 0).
+    """
+    c = np.array(cmds, dtype=np.float64, copy=True)
+    if c.ndim != 3 or c.shape[2] != 4:
+        raise DataError(f"commands must be (B, T, 4) [gear, torque, decel, steer], got {c.shape}")
+    B = c.shape[0]
+    init = np.zeros((B, 4))
+    if steer0 is not None:
+        init[:, 3] = steer0
+    for j in range(4):
+        x = c[:, :, j]
+        bad = np.isnan(x)
+        if bad.any():  # hold the last clean value
+            idx = np.where(~bad, np.arange(x.shape[1])[None], -1)
+            idx = np.maximum.accumulate(idx, axis=1)
+            held = np.take_along_axis(x, np.maximum(idx, 0), axis=1)
+            x = np.where(idx < 0, init[:, j : j + 1], held)
+        if j > 0:
+            x = np.clip(x, env.cmd_lo[j - 1], env.cmd_hi[j - 1])
+        c[:, :, j] = x
+    return c
+
+
+def limit_outputs_torch(
+    env: Envelope, torque: Tensor, pressure: Tensor, steer: Tensor, steer0: Tensor
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Output envelope over (B, T) submodel outputs; steer0 (B,) the angle before k = 0."""
+    torque = torch.clamp(torque, min=env.torque_floor)
+    pressure = torch.clamp(pressure, min=env.pressure_floor)
+    step = env.steer_rate_dps * DT
+    prev = steer0
+    outs = []
+    for k in range(steer.shape[1]):
+        s = torch.minimum(torch.maximum(steer[:, k], prev - step), prev + step)
+        s = torch.clamp(s, -env.steer_lock, env.steer_lock)
+        outs.append(s)
+        prev = s
+    return torque, pressure, torch.stack(outs, dim=1)

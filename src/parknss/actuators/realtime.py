@@ -1,0 +1,178 @@
+"""The chain in real time: NumPy float64, one vehicle, one 10 ms sample per call.
+
+:class:`NumpyNSS` is the NSS vehicle model's forward-Euler step and readout in NumPy
+(weights copied once in float64); :class:`RealtimeChain` strings the input envelope, the
+three actuator steppers (:mod:`parknss.actuators.steppers`), the output envelope and the
+NSS together with exactly the arithmetic of :meth:`parknss.chain.Chain.rollout`, so the
+two agree to rounding over whole trials (tests/test_chain.py asserts 1e-10 in float64).
+
+Timing of one call ``step(gear, torque_cmd, decel_cmd, steer_cmd)`` at sample k: the
+features of sample k are read from the NSS state x̂(k); the submodels give the actuals
+u(k); the outputs of sample k are the readout at (x̂(k), u(k)); the state advances to
+x̂(k+1) = x̂(k) + dt·f(x̂(k), u(k)). This is the alignment of the logs (a command and the
+state logged at the same sample), so ``step`` reproduces the batched rollout sample by
+sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from parknss.actuators.envelopes import Envelope, EnvelopeState
+from parknss.actuators.spec import CHANNELS
+from parknss.errors import CheckpointError
+
+
+def _linears(seq) -> list[tuple[np.ndarray, np.ndarray]]:
+    from torch import nn
+
+    return [
+        (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
+        for m in seq
+        if isinstance(m, nn.Linear)
+    ]
+
+
+class NumpyNSS:
+    """Forward-Euler step and readout of an :class:`~parknss.nss.model.NSSModel` in NumPy."""
+
+    def __init__(self, model) -> None:
+        if model.cfg.integrator != "euler":
+            raise CheckpointError("the real-time chain implements the forward-Euler NSS only")
+        self.dt = float(model.dt)
+        self.state = _linears(model.state_net)
+        self.output = _linears(model.output_net)
+        W0, b0 = self.state[0]
+        self.W0x, self.W0u = W0[:, :2].copy(), W0[:, 2:].copy()
+        self.b0 = b0
+
+        def buf(name):
+            return getattr(model, name).detach().double().numpy().copy()
+
+        self.in_off, self.in_sc = buf("in_off"), buf("in_sc")
+        self.in_lo, self.in_hi = buf("in_lo"), buf("in_hi")
+        self.st_off, self.st_sc = buf("st_off"), buf("st_sc")
+        self.st_lo, self.st_hi = buf("st_lo"), buf("st_hi")
+        self.out_off, self.out_sc = buf("out_off"), buf("out_sc")
+        g = model.geometry
+        self.L, self.ratio = float(g.wheelbase), float(g.steer_ratio)
+        self.residual = bool(model.cfg.residual_yaw)
+
+    def scale_u(self, u: np.ndarray) -> np.ndarray:
+        return (np.minimum(np.maximum(u, self.in_lo), self.in_hi) - self.in_off) / self.in_sc
+
+    def yaw_ref(self, vx_s: float, steer_s: float) -> float:
+        """ω_ref in rad/s from scaled vx and scaled steering angle."""
+        vx = vx_s * self.st_sc[0] + self.st_off[0]
+        steer = steer_s * self.in_sc[3] + self.in_off[3]
+        return vx / self.L * math.tan(steer / self.ratio * (math.pi / 180.0))
+
+    def initial_state(self, x0: np.ndarray, u0: np.ndarray) -> np.ndarray:
+        """Internal state from physical [vx, yaw] and physical u(0)."""
+        x0s = (np.minimum(np.maximum(x0, self.st_lo), self.st_hi) - self.st_off) / self.st_sc
+        if not self.residual:
+            return x0s
+        ref = self.yaw_ref(x0s[0], self.scale_u(u0)[3])
+        ref_s = (ref - self.st_off[1]) / self.st_sc[1]
+        return np.array([x0s[0], x0s[1] - ref_s])
+
+    def yaw(self, x: np.ndarray, steer_s: float) -> tuple[float, float]:
+        """(reconstructed scaled yaw, physical yaw) at state x and scaled steering."""
+        if self.residual:
+            ref_s = (self.yaw_ref(x[0], steer_s) - self.st_off[1]) / self.st_sc[1]
+            ys = ref_s + x[1]
+        else:
+            ys = x[1]
+        return ys, ys * self.st_sc[1] + self.st_off[1]
+
+    def vx(self, x: np.ndarray) -> float:
+        return x[0] * self.st_sc[0] + self.st_off[0]
+
+    def readout(self, x: np.ndarray, us: np.ndarray) -> tuple[float, float, float, float]:
+        """(vx m/s, yaw rad/s, ax, ay m/s²) at state x and scaled input us."""
+        ys, yaw = self.yaw(x, us[3])
+        h = np.array([x[0], ys, us[1], us[2], us[3]])
+        for W, b in self.output[:-1]:
+            h = np.tanh(W @ h + b)
+        W, b = self.output[-1]
+        y = W @ h + b
+        return (self.vx(x), yaw, y[0] * self.out_sc[0] + self.out_off[0],
+                y[1] * self.out_sc[1] + self.out_off[1])
+
+    def advance(self, x: np.ndarray, us: np.ndarray) -> np.ndarray:
+        """x̂(k+1) = x̂(k) + dt·f([x̂(k), u(k)])."""
+        h = np.tanh(self.W0x @ x + self.W0u @ us + self.b0)
+        for W, b in self.state[1:-1]:
+            h = np.tanh(W @ h + b)
+        W, b = self.state[-1]
+        return x + self.dt * (W @ h + b)
+
+
+class RealtimeChain:
+    """Envelopes -> steppers -> NSS, one sample per call (see the module doc)."""
+
+    def __init__(self, nss_model, models: dict, envelope: Envelope) -> None:
+        self.nss = NumpyNSS(nss_model)
+        self.specs = {c: (m.spec if m is not None else None) for c, m in models.items()}
+        self.steppers = {c: (m.stepper() if m is not None else None) for c, m in models.items()}
+        self.env = EnvelopeState(envelope)
+        self.dt = self.nss.dt
+        self.full = all(m is not None for m in models.values())
+
+    def _output_partial(self, ys: list[float]) -> tuple[float, float, float]:
+        """Output envelope on the modelled channels only (measured ones pass as logged)."""
+        t, p, s = self.env.output(*ys)
+        out = (t, p, s)
+        if self.specs["steering"] is None:
+            self.env.steer_prev = ys[2]
+        return tuple(o if self.specs[ch] is not None else y
+                     for o, y, ch in zip(out, ys, CHANNELS, strict=True))
+
+    def start(self, x0, y0, cmd0) -> None:
+        """Initial state: x0 [vx, yaw], actuals y0 [torque, pressure, steer], command cmd0
+        [gear, torque_cmd, decel_cmd, steer_cmd] that fills the histories."""
+        self.env.reset(steer=float(y0[2]), gear=float(cmd0[0]))
+        g, c = self.env.command(float(cmd0[0]), [float(v) for v in cmd0[1:]])
+        self.env.reset(steer=float(y0[2]), gear=g)
+        for i, ch in enumerate(CHANNELS):
+            s = self.steppers[ch]
+            if s is not None:
+                s.reset(c[i], float(y0[i]))
+        self._x0 = np.asarray(x0, dtype=np.float64)
+        self.x = None
+        self.yaw_prev = float(x0[1])
+        self.vx_now = float(x0[0])
+
+    def step(
+        self, gear: float, torque_cmd: float, decel_cmd: float, steer_cmd: float,
+        measured=None,
+    ):
+        """One sample: returns (actuals (3,), (vx, yaw, ax, ay)). ``measured`` (3,) supplies
+        the actuals of channels without a submodel (Phase B substitution)."""
+        g, c = self.env.command(gear, [torque_cmd, decel_cmd, steer_cmd])
+        vx, yaw = self.vx_now, self.yaw_prev
+        ys = []
+        for i, ch in enumerate(CHANNELS):
+            spec = self.specs[ch]
+            if spec is None:
+                ys.append(float(measured[i]))
+                continue
+            f = _features(spec.features, vx, yaw, g) if spec.features else None
+            ys.append(self.steppers[ch].step(c[i], f))
+        act = self.env.output(*ys) if self.full else self._output_partial(ys)
+        u = np.array([g, act[0], act[1], act[2]])
+        us = self.nss.scale_u(u)
+        if self.x is None:
+            self.x = self.nss.initial_state(self._x0, u)
+        out = self.nss.readout(self.x, us)
+        self.x = self.nss.advance(self.x, us)
+        self.vx_now = self.nss.vx(self.x)
+        self.yaw_prev = self.nss.yaw(self.x, us[3])[1]
+        return act, out
+
+
+def _features(names, vx: float, yaw: float, gear: float) -> np.ndarray:
+    vals = {"speed": abs(vx), "vx": vx, "yaw_rate": yaw, "gear": gear}
+    return np.array([vals[n] for n in names])

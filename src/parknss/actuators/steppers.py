@@ -1,0 +1,193 @@
+"""NumPy float64 real-time twins of the candidates: one sample per call, ring buffers.
+
+``make_stepper(model)`` copies a fitted candidate's parameters into plain float64 arrays
+and returns an object with ``reset(c0, y0)`` (first command and measured actual, physical
+units) and ``step(c, f) -> y`` (command float, features (F,) array or None; returns the
+actual in physical units). The arithmetic is the candidate's ``step`` written in NumPy, so
+a whole-trial replay equals ``rollout`` to rounding (tests/test_actuators_models.py). No
+torch in the loop: a sample costs microseconds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _mlp_layers(p: dict, prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    idx = sorted({int(k.split(".")[1]) for k in p if k.startswith(prefix + ".")})
+    return [(p[f"{prefix}.{i}.weight"], p[f"{prefix}.{i}.bias"]) for i in idx]
+
+
+def _mlp(layers, z: np.ndarray) -> float:
+    h = z
+    for W, b in layers[:-1]:
+        h = np.tanh(W @ h + b)
+    W, b = layers[-1]
+    return float((W @ h + b)[0])
+
+
+class _Base:
+    def __init__(self, model) -> None:
+        p = model.numpy_params()
+        self.p = p
+        self.c_off, self.c_sc = float(p["c_off"]), float(p["c_sc"])
+        self.f_off, self.f_sc = p["f_off"], p["f_sc"]
+        self.y_off, self.y_sc = float(p["y_off"]), float(p["y_sc"])
+        self.n_feat = model.n_feat
+        self.dt = float(model.dt)
+
+    def feats(self, f) -> np.ndarray:
+        if self.n_feat == 0:
+            return np.zeros(0)
+        return (np.asarray(f, dtype=np.float64) - self.f_off) / self.f_sc
+
+
+class StaticStepper(_Base):
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        self.k, self.b, self.w = float(self.p["k"]), float(self.p["b"]), self.p["w"]
+
+    def target(self, c: float, f: np.ndarray) -> float:
+        t = self.k * c + self.b
+        if self.n_feat:
+            t = t + float(np.sum(f * self.w))
+        return t
+
+    def reset(self, c0: float, y0: float) -> None:
+        pass
+
+    def step(self, c: float, f=None) -> float:
+        cs = (c - self.c_off) / self.c_sc
+        return self.target(cs, self.feats(f)) * self.y_sc + self.y_off
+
+
+class Lag1Stepper(StaticStepper):
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        self.log_tau, self.v = float(self.p["log_tau"]), self.p["v"]
+        self.psi = _mlp_layers(self.p, "psi") if "psi.0.weight" in self.p else None
+        self.y = 0.0
+
+    def reset(self, c0: float, y0: float) -> None:
+        self.y = (y0 - self.y_off) / self.y_sc
+
+    def step(self, c: float, f=None) -> float:
+        cs = (c - self.c_off) / self.c_sc
+        fs = self.feats(f)
+        lt = self.log_tau + (float(np.sum(fs * self.v)) if self.n_feat else 0.0)
+        a = math.exp(-self.dt * math.exp(-lt))
+        u = self.target(cs, fs)
+        if self.psi is not None:
+            u = u + _mlp(self.psi, np.concatenate([[cs], fs]))
+        out = self.y * self.y_sc + self.y_off
+        self.y = a * self.y + (1.0 - a) * u
+        return out
+
+
+class Lag2Stepper(StaticStepper):
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        A, Bv = model.discrete()
+        self.A = A.detach().numpy().astype(np.float64)
+        self.Bv = Bv.detach().numpy().astype(np.float64)
+        self.pos = self.rate = 0.0
+
+    def reset(self, c0: float, y0: float) -> None:
+        self.pos, self.rate = (y0 - self.y_off) / self.y_sc, 0.0
+
+    def step(self, c: float, f=None) -> float:
+        t = self.target((c - self.c_off) / self.c_sc, self.feats(f))
+        (a00, a01), (a10, a11) = self.A
+        p, r = self.pos, self.rate
+        out = p * self.y_sc + self.y_off
+        self.pos = a00 * p + a01 * r + self.Bv[0] * t
+        self.rate = a10 * p + a11 * r + self.Bv[1] * t
+        return out
+
+
+class NARXStepper(_Base):
+    """Ring buffer of the last n+1 scaled commands, kept twice so a window is one slice."""
+
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        self.n = model.lags + 1
+        self.net = _mlp_layers(self.p, "net")
+        self.skip_w, self.skip_b = self.p["skip.weight"][0], float(self.p["skip.bias"][0])
+        self.buf = np.zeros(2 * self.n)
+        self.i = 0
+
+    def reset(self, c0: float, y0: float) -> None:
+        self.buf[:] = (c0 - self.c_off) / self.c_sc
+        self.i = 0
+
+    def step(self, c: float, f=None) -> float:
+        cs = (c - self.c_off) / self.c_sc
+        self.buf[self.i] = self.buf[self.i + self.n] = cs
+        self.i = (self.i + 1) % self.n
+        win = self.buf[self.i : self.i + self.n]  # oldest .. newest
+        z = np.concatenate([win, self.feats(f)]) if self.n_feat else win
+        y = _mlp(self.net, z) + float(self.skip_w @ z) + self.skip_b
+        return y * self.y_sc + self.y_off
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+class GRUStepper(_Base):
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        p = self.p
+        self.Wi, self.bi = p["rnn.weight_ih_l0"], p["rnn.bias_ih_l0"]
+        self.Wh, self.bh = p["rnn.weight_hh_l0"], p["rnn.bias_hh_l0"]
+        self.Wo, self.bo = p["out.weight"][0], float(p["out.bias"][0])
+        self.H = model.hidden
+        self.h = np.zeros(self.H)
+
+    def reset(self, c0: float, y0: float) -> None:
+        self.h = np.zeros(self.H)
+
+    def inputs(self, c: float, f) -> np.ndarray:
+        cs = (c - self.c_off) / self.c_sc
+        return np.concatenate([[cs], self.feats(f)]) if self.n_feat else np.array([cs])
+
+    def step(self, c: float, f=None) -> float:
+        H, h = self.H, self.h
+        gi = self.Wi @ self.inputs(c, f) + self.bi
+        gh = self.Wh @ h + self.bh
+        r = _sigmoid(gi[:H] + gh[:H])
+        z = _sigmoid(gi[H : 2 * H] + gh[H : 2 * H])
+        n = np.tanh(gi[2 * H :] + r * gh[2 * H :])
+        self.h = (1.0 - z) * n + z * h
+        return (float(self.Wo @ self.h) + self.bo) * self.y_sc + self.y_off
+
+
+class LSTMStepper(GRUStepper):
+    def reset(self, c0: float, y0: float) -> None:
+        self.h = np.zeros(self.H)
+        self.c = np.zeros(self.H)
+
+    def step(self, c: float, f=None) -> float:
+        H = self.H
+        g = (self.Wi @ self.inputs(c, f) + self.bi) + (self.Wh @ self.h + self.bh)
+        i = _sigmoid(g[:H])
+        fg = _sigmoid(g[H : 2 * H])
+        gg = np.tanh(g[2 * H : 3 * H])
+        o = _sigmoid(g[3 * H :])
+        self.c = fg * self.c + i * gg
+        self.h = o * np.tanh(self.c)
+        return (float(self.Wo @ self.h) + self.bo) * self.y_sc + self.y_off
+
+
+STEPPERS = {
+    "static": StaticStepper, "lag1": Lag1Stepper, "hammerstein": Lag1Stepper,
+    "lag2": Lag2Stepper, "narx": NARXStepper, "narx1s": NARXStepper,
+    "gru": GRUStepper, "lstm": LSTMStepper,
+}
+
+
+def make_stepper(model):
+    """The NumPy real-time twin of a candidate (see the module doc)."""
+    return STEPPERS[model.spec.arch](model)
