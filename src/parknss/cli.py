@@ -31,6 +31,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "plan",
     "rate",
     "simulate",
+    "actuators",
     "web",
     "nss",
     "study",
