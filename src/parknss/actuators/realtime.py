@@ -44,9 +44,8 @@ class NumpyNSS:
         self.dt = float(model.dt)
         self.state = _linears(model.state_net)
         self.output = _linears(model.output_net)
-        W0, b0 = self.state[0]
-        self.W0x, self.W0u = W0[:, :2].copy(), W0[:, 2:].copy()
-        self.b0 = b0
+        self._z = np.zeros(self.state[0][0].shape[1])  # [x, u_s] buffer of the first layer
+        self._g = np.zeros(5)  # [vx_s, yaw_s, torque_s, pressure_s, steer_s] output input
 
         def buf(name):
             return getattr(model, name).detach().double().numpy().copy()
@@ -60,8 +59,13 @@ class NumpyNSS:
         self.L, self.ratio = float(g.wheelbase), float(g.steer_ratio)
         self.residual = bool(model.cfg.residual_yaw)
 
-    def scale_u(self, u: np.ndarray) -> np.ndarray:
-        return (np.minimum(np.maximum(u, self.in_lo), self.in_hi) - self.in_off) / self.in_sc
+        self._lo, self._hi = self.in_lo.tolist(), self.in_hi.tolist()
+        self._off, self._sc = self.in_off.tolist(), self.in_sc.tolist()
+
+    def scale_u(self, u) -> np.ndarray:
+        """Scaled (clipped) input of physical u (4,); Python floats, one array at the end."""
+        lo, hi, off, sc = self._lo, self._hi, self._off, self._sc
+        return np.array([(min(max(u[i], lo[i]), hi[i]) - off[i]) / sc[i] for i in range(4)])
 
     def yaw_ref(self, vx_s: float, steer_s: float) -> float:
         """ω_ref in rad/s from scaled vx and scaled steering angle."""
@@ -93,7 +97,9 @@ class NumpyNSS:
     def readout(self, x: np.ndarray, us: np.ndarray) -> tuple[float, float, float, float]:
         """(vx m/s, yaw rad/s, ax, ay m/s²) at state x and scaled input us."""
         ys, yaw = self.yaw(x, us[3])
-        h = np.array([x[0], ys, us[1], us[2], us[3]])
+        h = self._g
+        h[0], h[1] = x[0], ys
+        h[2:] = us[1:]
         for W, b in self.output[:-1]:
             h = np.tanh(W @ h + b)
         W, b = self.output[-1]
@@ -103,7 +109,11 @@ class NumpyNSS:
 
     def advance(self, x: np.ndarray, us: np.ndarray) -> np.ndarray:
         """x̂(k+1) = x̂(k) + dt·f([x̂(k), u(k)])."""
-        h = np.tanh(self.W0x @ x + self.W0u @ us + self.b0)
+        z = self._z
+        z[:2] = x
+        z[2:] = us
+        W0, b0 = self.state[0]
+        h = np.tanh(W0 @ z + b0)
         for W, b in self.state[1:-1]:
             h = np.tanh(W @ h + b)
         W, b = self.state[-1]

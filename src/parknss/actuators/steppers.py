@@ -37,22 +37,34 @@ class _Base:
         self.y_off, self.y_sc = float(p["y_off"]), float(p["y_sc"])
         self.n_feat = model.n_feat
         self.dt = float(model.dt)
+        self._fo, self._fs = self.f_off.tolist(), self.f_sc.tolist()
 
     def feats(self, f) -> np.ndarray:
         if self.n_feat == 0:
             return np.zeros(0)
         return (np.asarray(f, dtype=np.float64) - self.f_off) / self.f_sc
 
+    def feats_list(self, f) -> list[float]:
+        """Scaled features as Python floats (cheaper than NumPy for F <= 3)."""
+        if self.n_feat == 0:
+            return []
+        return [(float(f[i]) - self._fo[i]) / self._fs[i] for i in range(self.n_feat)]
+
+
+def _dot(a: list[float], b: list[float]) -> float:
+    return math.fsum(x * y for x, y in zip(a, b, strict=True))
+
 
 class StaticStepper(_Base):
     def __init__(self, model) -> None:
         super().__init__(model)
-        self.k, self.b, self.w = float(self.p["k"]), float(self.p["b"]), self.p["w"]
+        self.k, self.b = float(self.p["k"]), float(self.p["b"])
+        self.w = self.p["w"].tolist()
 
-    def target(self, c: float, f: np.ndarray) -> float:
+    def target(self, c: float, f: list[float]) -> float:
         t = self.k * c + self.b
         if self.n_feat:
-            t = t + float(np.sum(f * self.w))
+            t = t + _dot(f, self.w)
         return t
 
     def reset(self, c0: float, y0: float) -> None:
@@ -60,13 +72,13 @@ class StaticStepper(_Base):
 
     def step(self, c: float, f=None) -> float:
         cs = (c - self.c_off) / self.c_sc
-        return self.target(cs, self.feats(f)) * self.y_sc + self.y_off
+        return self.target(cs, self.feats_list(f)) * self.y_sc + self.y_off
 
 
 class Lag1Stepper(StaticStepper):
     def __init__(self, model) -> None:
         super().__init__(model)
-        self.log_tau, self.v = float(self.p["log_tau"]), self.p["v"]
+        self.log_tau, self.v = float(self.p["log_tau"]), self.p["v"].tolist()
         self.psi = _mlp_layers(self.p, "psi") if "psi.0.weight" in self.p else None
         self.y = 0.0
 
@@ -75,12 +87,12 @@ class Lag1Stepper(StaticStepper):
 
     def step(self, c: float, f=None) -> float:
         cs = (c - self.c_off) / self.c_sc
-        fs = self.feats(f)
-        lt = self.log_tau + (float(np.sum(fs * self.v)) if self.n_feat else 0.0)
+        fs = self.feats_list(f)
+        lt = self.log_tau + (_dot(fs, self.v) if self.n_feat else 0.0)
         a = math.exp(-self.dt * math.exp(-lt))
         u = self.target(cs, fs)
         if self.psi is not None:
-            u = u + _mlp(self.psi, np.concatenate([[cs], fs]))
+            u = u + _mlp(self.psi, np.array([cs, *fs]))
         out = self.y * self.y_sc + self.y_off
         self.y = a * self.y + (1.0 - a) * u
         return out
@@ -98,7 +110,7 @@ class Lag2Stepper(StaticStepper):
         self.pos, self.rate = (y0 - self.y_off) / self.y_sc, 0.0
 
     def step(self, c: float, f=None) -> float:
-        t = self.target((c - self.c_off) / self.c_sc, self.feats(f))
+        t = self.target((c - self.c_off) / self.c_sc, self.feats_list(f))
         (a00, a01), (a10, a11) = self.A
         p, r = self.pos, self.rate
         out = p * self.y_sc + self.y_off
