@@ -113,3 +113,44 @@ def test_shipped_config_has_the_paper_budget_and_axes():
         "integrator",
         "capacity",
     } <= names
+
+
+def test_findings_verdicts_follow_the_floor():
+    from parknss.experiments.ablations import AblationResult, AxisResult, OptionResult
+    from parknss.experiments.findings import ablation_findings
+    from parknss.experiments.sweep import FoldScore
+
+    def opt(axis, label, vx, deployed=False, wall=10.0):
+        s = FoldScore(vx, vx, 1.0, vx, 1.0, wall, 3, 12, epochs=10)
+        return OptionResult(axis, label, deployed, [s])
+
+    fl = NoiseFloor(vx=0.02, yaw=0.035, n_seeds=5, source="measured")
+    res = AblationResult(
+        [
+            AxisResult(
+                "yaw readout", [opt("y", "res", 0.1, True), opt("y", "direct", 0.127)], False
+            ),
+            AxisResult("loss", [opt("l", "MAE", 0.1, True), opt("l", "MSE", 0.101)], False),
+            AxisResult(
+                "integrator",
+                [
+                    opt("i", "Euler (fused)", 0.1, True, wall=10.0),
+                    opt("i", "Euler (eager)", 0.1, wall=20.0),
+                    opt("i", "RK4", 0.1005, wall=60.0),
+                ],
+                True,
+            ),
+        ],
+        fl,
+        3000,
+        [0],
+    )
+    found = {f.claim.split(" (")[0]: f for f in ablation_findings(res)}
+    readout = next(f for c, f in found.items() if c.startswith("The residual"))
+    assert readout.verdict == "agrees"  # +27 % is beyond 2·2 %
+    loss = next(f for c, f in found.items() if c.startswith("MAE"))
+    assert loss.verdict == "within noise"  # +1 % is inside the floor
+    window = next(f for c, f in found.items() if c.startswith("The shortest"))
+    assert window.verdict == "not measured"
+    euler = next(f for c, f in found.items() if c.startswith("Euler"))
+    assert euler.agrees is True and "x3.00 vs eager Euler" in euler.measured

@@ -58,6 +58,7 @@ def test_seed_noise_pool_equals_in_process_and_resumes(tiny, tmp_path, monkeypat
     assert [s.vx for s in again.scores] == [s.vx for s in serial.scores]
 
 
+@pytest.mark.slow
 def test_seed_noise_under_ray_matches_local(tiny):
     pytest.importorskip("ray")
     data, cfg = tiny

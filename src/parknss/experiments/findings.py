@@ -16,10 +16,15 @@ from parknss.experiments.learning_curve import LearningCurveResult
 from parknss.experiments.limiter_study import LimiterResult
 from parknss.experiments.noise import SeedNoiseResult
 from parknss.experiments.registry import Finding
+from parknss.experiments.sweep import relative_effect
 
 
 def _pct(x: float) -> str:
     return "n/a" if not math.isfinite(x) else f"{100 * x:+.1f} %"
+
+
+def _lr(lr: float | None) -> str:
+    return "" if lr is None else f" (LR {lr:g})"
 
 
 def _lower_is(effects: list[float], floor, channel: str) -> bool | None:
@@ -64,11 +69,9 @@ def ablation_findings(res: AblationResult) -> list[Finding]:
     else:
         other = [o for o in ax.options if not o.deployed]
         eff = [ax.effect(o.label, "vx") for o in other]
-        text = ", ".join(
-            f"{o.label} {_pct(e)} (LR {o.lr:g})" for o, e in zip(other, eff, strict=True)
-        )
+        text = ", ".join(f"{o.label} {_pct(e)}{_lr(o.lr)}" for o, e in zip(other, eff, strict=True))
         out.append(
-            Finding(claim, f"vx vs MAE (LR {ax.baseline().lr:g}): {text}", _lower_is(eff, fl, "vx"))
+            Finding(claim, f"vx vs MAE{_lr(ax.baseline().lr)}: {text}", _lower_is(eff, fl, "vx"))
         )
     claim = "The shortest training windows generalize best (vx 0.079 vs 0.103 / 0.092)"
     ax = res.axis("training window")
@@ -92,11 +95,16 @@ def _integrator_finding(res: AblationResult) -> Finding:
         return _axis_missing(claim, "integrator (with an RK4 option)")
     eager = next((lbl for lbl in labels if "eager" in lbl.lower()), None)
     fl = res.floor
-    e_vx, e_yaw = ax.effect(rk4, "vx"), ax.effect(rk4, "yaw")
+    # accuracy against the eager Euler when there is one: the same engine and budget
+    ref = next(o for o in ax.options if o.label == (eager or ax.baseline().label))
+    opt = next(o for o in ax.options if o.label == rk4)
+    e_vx = relative_effect(opt.mean("vx"), ref.mean("vx"))
+    e_yaw = relative_effect(opt.mean("yaw"), ref.mean("yaw"))
     tie = [fl.confirms_null(e_vx, "vx"), fl.confirms_null(e_yaw, "yaw")]
     ratio_fused = ax.cost_ratio(rk4)
     text = (
-        f"RK4 vs Euler: vx {_pct(e_vx)}, yaw {_pct(e_yaw)}; cost x{ratio_fused:.2f} vs fused Euler"
+        f"RK4 vs {ref.label}: vx {_pct(e_vx)}, yaw {_pct(e_yaw)}; "
+        f"cost x{ratio_fused:.2f} vs fused Euler"
     )
     ratio_eager = math.nan
     if eager is not None:

@@ -35,9 +35,13 @@ class Sweep:
     progress: bool = True
 
     def run(self, jobs: list[Job], desc: str) -> list[Any]:
-        """Results of ``jobs`` in order (cached jobs are read, not recomputed)."""
-        return run_jobs(
-            jobs,
+        """Results of ``jobs`` in order (cached jobs are read, not recomputed; identical
+        jobs, e.g. the deployed option shared by several ablation axes, run once)."""
+        unique: dict[str, Job] = {}
+        for job in jobs:
+            unique.setdefault(job.key(), job)
+        results = run_jobs(
+            list(unique.values()),
             executor=self.executor,
             workers=self.workers,
             cache_dir=self.cache_dir,
@@ -45,6 +49,8 @@ class Sweep:
             progress=self.progress,
             desc=desc,
         )
+        by_key = dict(zip(unique, results, strict=True))
+        return [by_key[job.key()] for job in jobs]
 
     def campaign(self):
         from parknss.nss.campaigns import load_campaign
