@@ -51,7 +51,7 @@ def test_refined_path_meets_start_goal_and_cusps_exactly(planned):
     assert abs(math.remainder(end[2] - scene.goal[2], 2 * math.pi)) < 1e-9
 
 
-def _integrate(p0, v0, v1, d0, d1, dt, direction, steps=200):
+def _integrate(p0, v0, v1, d0, d1, dt, direction, steps=20):
     """RK4 of the kinematic bicycle with speed and road-wheel angle linear in time."""
 
     def f(p, tau):
@@ -76,7 +76,8 @@ def test_refined_samples_follow_the_kinematic_bicycle(planned):
     worst_xy = worst_th = 0.0
     for seg in res.trajectory.segments:
         delta = np.radians(seg.steer / GEOM.steer_ratio)
-        for i in range(0, len(seg.poses) - 1, 3):
+        last = len(seg.poses) - 2  # includes the snap onto the exact end pose
+        for i in [*range(0, last, 4), last]:
             dt = seg.t[i + 1] - seg.t[i]
             assert dt > 0
             p = _integrate(
@@ -90,7 +91,9 @@ def test_refined_samples_follow_the_kinematic_bicycle(planned):
             )
             worst_xy = max(worst_xy, float(np.hypot(*(p[:2] - seg.poses[i + 1, :2]))))
             worst_th = max(worst_th, abs(p[2] - seg.poses[i + 1, 2]))
-    # samples are 5 cm apart; speed/steer linear between them is the model's assumption
+    # samples are 5 cm apart; speed/steer linear between them is the model's assumption;
+    # the solver meets the end pose to 2 mm / 0.1 deg and the last sample is snapped on it
+    print(f"worst {worst_xy * 1000:.2f} mm, {math.degrees(worst_th):.3f} deg")
     assert worst_xy < 5e-3 and worst_th < math.radians(0.3)
 
 

@@ -56,6 +56,7 @@ class RefineResult:
         ok: True when every segment solved and the dense check passed.
         reason: "solved", or what failed (segment, IPOPT status, dense clearance).
         solve_time_s: wall time of the whole refinement, s.
+        cpu_s: CPU time of this process during the refinement, s (the budget's clock).
         min_clearance_m: dense exact clearance of the refined path (nan if not checked).
         segments: per-segment details (intervals, obstacles, iterations, status, T s).
     """
@@ -64,6 +65,7 @@ class RefineResult:
     ok: bool
     reason: str
     solve_time_s: float = 0.0
+    cpu_s: float = 0.0
     min_clearance_m: float = math.nan
     segments: list[dict] = field(default_factory=list)
 
@@ -114,7 +116,8 @@ def refine(
 
     def fail(reason: str) -> RefineResult:
         traj = coarse_fallback(coarse, cfg, reason)
-        return RefineResult(traj, False, reason, time.perf_counter() - t0, math.nan, details)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+        return RefineResult(traj, False, reason, wall, cpu, math.nan, details)
 
     n_seg = len(coarse.segments)
     for i, seg in enumerate(coarse.segments):
@@ -138,7 +141,8 @@ def refine(
     if not passed:
         what = "left the map" if clr < 0 else f"clearance {clr:.3f} m < {margin:.3f} m"
         return fail(f"refined path failed the dense check ({what})")
-    return RefineResult(traj, True, "solved", time.perf_counter() - t0, clr, details)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    return RefineResult(traj, True, "solved", wall, cpu, clr, details)
 
 
 def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin: float, cpu0):
@@ -151,6 +155,7 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         geom,
         cfg.speed_max_ms,
         cfg.accel_max_ms2,
+        cfg.steer_rate_max_dps,
         cfg.dt_target_s,
         cfg.min_intervals,
         cfg.max_intervals,

@@ -9,6 +9,8 @@ parking-capable electric power steering.
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field
 
 from parknss.config import StrictModel
@@ -42,6 +44,13 @@ class RefineConfig(StrictModel):
     min_segment_m: float = Field(
         0.02, ge=0.0, description="shorter gear segments keep the coarse poses, m"
     )
+    # The end pose is met within a thin box rather than exactly: a coarse segment at full
+    # lock on both sides of a steering change ends on the boundary of the reachable set,
+    # where the exact constraint leaves IPOPT no interior. The output ends exactly on it.
+    end_tolerance_m: float = Field(
+        0.002, ge=0.0, description="solver's tolerance on the end pose position, m"
+    )
+    end_tolerance_deg: float = Field(0.1, ge=0.0, description="...and heading, deg")
     # vehicle limits
     speed_max_ms: float = Field(0.8333, gt=0.0, description="parking speed limit, m/s")
     accel_max_ms2: float = Field(0.5, gt=0.0, description="|acceleration| limit, m/s²")
@@ -59,6 +68,7 @@ class RefineConfig(StrictModel):
     max_iter: int = Field(300, ge=1, description="IPOPT iterations per gear segment")
     cpu_time_s: float = Field(8.0, gt=0.0, description="IPOPT CPU-time budget, whole path, s")
     tol: float = Field(1e-6, gt=0.0, description="IPOPT convergence tolerance")
+    mu_strategy: Literal["adaptive", "monotone"] = Field("adaptive", description="IPOPT barrier")
     # output and fallback
     output_step_m: float = Field(0.05, gt=0.0, description="pose spacing of the result, m")
     fallback_speed_ms: float = Field(0.6, gt=0.0, description="coarse fallback cruise, m/s")

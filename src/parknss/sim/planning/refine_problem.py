@@ -148,7 +148,13 @@ def solve_segment(
     # boundary conditions: poses fixed, standstill at both ends
     p0, p1 = ws.poses[0], ws.poses[-1]
     opti.subject_to(X[0:3, 0] == p0)
-    opti.subject_to(X[0:3, n] == p1)
+    if cfg.end_tolerance_m > 0:  # a thin tube instead of a point (see RefineConfig)
+        tol = np.array(
+            [cfg.end_tolerance_m, cfg.end_tolerance_m, math.radians(cfg.end_tolerance_deg)]
+        )
+        opti.subject_to(opti.bounded(p1 - tol, X[0:3, n], p1 + tol))
+    else:
+        opti.subject_to(X[0:3, n] == p1)
     opti.subject_to(v[0] == 0)
     opti.subject_to(v[n] == 0)
 
@@ -228,7 +234,7 @@ def solve_segment(
             "max_cpu_time": float(max(cpu_time_s, 1e-3)),
             "tol": float(cfg.tol),
             "acceptable_tol": float(cfg.tol) * 100,
-            "mu_strategy": "adaptive",
+            "mu_strategy": cfg.mu_strategy,
         },
     )
     try:

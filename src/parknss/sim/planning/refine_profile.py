@@ -2,7 +2,7 @@
 
 * :func:`trapezoid` -- the rest-to-rest trapezoidal (or triangular) speed profile over a
   length, as speed and time at given arc positions, and its inverse :func:`trapezoid_at_time`.
-* :func:`warm_start` -- the coarse segment timed by a trapezoid and sampled at N+1 knots.
+* :func:`warm_start` -- the coarse segment driven stop-to-steer, sampled at N+1 knots.
 * :func:`sample_solution` -- a solved segment resampled every ``step`` m of travel, exact on
   the solution's arcs, with speed, steering and time stamps.
 """
@@ -82,34 +82,66 @@ def poses_at(seg: Segment, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return geometry.arc_interpolate(seg.poses[i], seg.poses[i + 1], tau), i
 
 
+def _pieces(seg: Segment) -> tuple[np.ndarray, np.ndarray]:
+    """(arc bounds (P+1,) m, steering-wheel angle (P,) deg) of the runs of constant
+    steering along a coarse segment (one run if it carries no steering)."""
+    arc = seg.arc_length
+    if seg.steer is None:
+        return np.array([0.0, arc[-1]]), np.zeros(1)
+    st = np.asarray(seg.steer, dtype=float)[1:]  # steering of the arc ending at pose j+1
+    new = np.flatnonzero(np.abs(np.diff(st)) > 1e-6) + 1
+    bounds = np.concatenate([[0.0], arc[new], [arc[-1]]])
+    return bounds, st[np.concatenate([[0], new])]
+
+
 def warm_start(
     seg: Segment,
     geom: VehicleGeometry,
     v_max: float,
     a_max: float,
+    rate_dps: float,
     dt: float,
     n_min: int,
     n_max: int,
 ) -> WarmStart:
-    """The coarse segment timed by a trapezoid (``v_max``, ``a_max``) at N+1 knots, N from
-    the time step ``dt`` (s) clamped to [n_min, n_max]; steering from the coarse steer."""
-    length = seg.length
-    _, _, total = trapezoid_at_time(np.zeros(1), length, v_max, a_max)
+    """The coarse segment driven stop-to-steer, sampled at N+1 knots.
+
+    Each run of constant steering is driven rest to rest with a trapezoid (``v_max``,
+    ``a_max``), and between runs the wheel turns at standstill at ``rate_dps`` (deg/s).
+    This is a feasible motion of the coarse path (up to the jerk bound), so the solver
+    starts from a point that satisfies the dynamics, the bounds and the clearance, and a
+    segment that must be driven at full lock on both sides of a steering change (a path
+    on the boundary of the reachable set) still has its only solution available. N comes
+    from the duration and ``dt`` (s), clamped to [n_min, n_max].
+    """
+    bounds, steer = _pieces(seg)
+    lengths = np.diff(bounds)
+    runs = [trapezoid_at_time(np.zeros(1), ln, v_max, a_max)[2] for ln in lengths]
+    dwells = np.abs(np.diff(steer)) / rate_dps
+    # timeline: run 0, dwell 0, run 1, dwell 1, ..., run P-1
+    spans = np.empty(2 * len(runs) - 1)
+    spans[0::2], spans[1::2] = runs, dwells
+    edges = np.concatenate([[0.0], np.cumsum(spans)])
+    total = float(edges[-1])
     n = int(min(max(math.ceil(total / dt), n_min), n_max))
     t = np.linspace(0.0, total, n + 1)
-    s, speed, _ = trapezoid_at_time(t, length, v_max, a_max)
-    s[-1] = length
-    poses, i = poses_at(seg, s)
+    j = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(spans) - 1)
+    s, speed, sw = np.empty(n + 1), np.zeros(n + 1), np.empty(n + 1)
+    for k in range(n + 1):
+        piece, tau = j[k] // 2, t[k] - edges[j[k]]
+        if j[k] % 2 == 0:  # driving run `piece`
+            arc, v, _ = trapezoid_at_time(np.array([tau]), lengths[piece], v_max, a_max)
+            s[k], speed[k], sw[k] = bounds[piece] + arc[0], v[0], steer[piece]
+        else:  # steering at standstill after run `piece`
+            frac = tau / max(spans[j[k]], 1e-12)
+            s[k] = bounds[piece + 1]
+            sw[k] = steer[piece] + frac * (steer[piece + 1] - steer[piece])
+    s[-1], speed[0], speed[-1] = seg.length, 0.0, 0.0
+    poses, _ = poses_at(seg, s)
     poses[0], poses[-1] = seg.poses[0], seg.poses[-1]
-    if seg.steer is not None:
-        delta = np.radians(
-            np.asarray(seg.steer, dtype=float)[np.minimum(i + 1, len(seg.steer) - 1)]
-        )
-        delta = delta / geom.steer_ratio
-    else:
-        delta = np.zeros(n + 1)
     lock = math.radians(geom.steer_lock_deg / geom.steer_ratio)
-    return WarmStart(poses, speed, np.clip(delta, -lock, lock), total / n, int(seg.direction))
+    delta = np.clip(np.radians(sw) / geom.steer_ratio, -lock, lock)
+    return WarmStart(poses, speed, delta, total / n, int(seg.direction))
 
 
 def sample_solution(
