@@ -186,7 +186,7 @@ def seed_noise_findings(res: SeedNoiseResult) -> list[Finding]:
 def cotuning_finding() -> Finding:
     return Finding(
         "Co-tuning reverses the brake verdict (§V-D)",
-        "actuator co-tuning is not available in this checkout",
+        "the actuator co-tuning study is not wired into parknss reproduce yet",
         None,
         "not measured",
     )
