@@ -182,7 +182,7 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         if not sol.success:
             detail["failure"] = f"IPOPT {sol.status}"
             return None, detail
-        out = sample_solution(sol, seg.direction, ends, geom, cfg.output_step_m)
+        out = sample_solution(sol, seg.direction, ends, geom, cfg.output_step_m, cfg.end_blend_m)
         short = _short_intervals(out, sol.h, n, obstacles, geom, pcfg, margin)
         if not short:
             return out, detail

@@ -51,6 +51,9 @@ class RefineConfig(StrictModel):
         0.002, ge=0.0, description="solver's tolerance on the end pose position, m"
     )
     end_tolerance_deg: float = Field(0.1, ge=0.0, description="...and heading, deg")
+    end_blend_m: float = Field(
+        1.0, gt=0.0, description="the end offset is blended in over this much path, m"
+    )
     # vehicle limits
     speed_max_ms: float = Field(0.8333, gt=0.0, description="parking speed limit, m/s")
     accel_max_ms2: float = Field(0.5, gt=0.0, description="|acceleration| limit, m/s²")

@@ -150,11 +150,13 @@ def sample_solution(
     ends: tuple[np.ndarray, np.ndarray],
     geom: VehicleGeometry,
     step: float,
+    blend: float = 1.0,
 ) -> Segment:
     """The solved segment as a dense :class:`Segment`: poses every <= ``step`` m along each
         interval's arc (knots included), speed (>= 0, 0 at the end), steering-wheel angle (deg)
         and time (s). Intervals without travel add no pose; their time carries over. The first
-    and last poses are set to ``ends`` (the fixed poses the solver met to its tolerance)."""
+    and last poses are ``ends``; the solver met the end pose within its tolerance box, and
+    that offset is blended in linearly over the last ``blend`` m."""
     p, v, de, h = sol.poses, np.maximum(sol.speed, 0.0), sol.delta, sol.h
     start_pose, end_pose = (np.asarray(e, dtype=float) for e in ends)
     n = len(p) - 1
@@ -187,7 +189,13 @@ def sample_solution(
     if len(poses) < 2:  # no travel at all: keep the two end poses
         poses = np.vstack([start_pose, end_pose])
         speed, delta, t = np.zeros(2), de[[0, -1]], np.array([0.0, n * h])
-    poses[-1] = end_pose
+    # the solver met the end pose to its tolerance box: blend the offset in over the last
+    # ``blend`` m so the path ends exactly on it without a kink
+    err = end_pose - poses[-1]
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
+    w = np.clip((arc - (arc[-1] - blend)) / max(blend, 1e-9), 0.0, 1.0)
+    poses = poses + w[:, None] * err[None, :]
+    poses[0], poses[-1] = start_pose, end_pose
     speed[0] = speed[-1] = 0.0  # standstill by constraint, to solver tolerance
     t[-1] = n * h
     steer = np.degrees(delta) * geom.steer_ratio
