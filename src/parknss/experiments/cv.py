@@ -84,12 +84,12 @@ class CVResult:
 
     def table(self) -> str:
         """Table II as text: NSS per fold and mean ± std, then the baselines' mean ± std."""
-        head = f"{'':32s}" + "".join(f"{label:>22s}" for _, label in COLUMNS)
+        head = f"{'':36s}" + "".join(f"{label:>22s}" for _, label in COLUMNS)
         lines = ["Table II: stratified 4-fold CV on held-out maneuvers (moving region)", head]
         if "nss" in self.folds:
             for i, _ in enumerate(self.folds["nss"]):
                 cells = "".join(f"{self.column('nss', k)[i]:>22.3f}" for k, _ in COLUMNS)
-                lines.append(f"{'fold ' + str(i):32s}{cells}")
+                lines.append(f"{'fold ' + str(i):36s}{cells}")
         for ref, tag in (("errors", ""), ("truth_errors", " vs truth")):
             s = self.summary(ref)
             for var in self.folds:
@@ -98,7 +98,7 @@ class CVResult:
                 )
                 if all(math.isnan(s[var][k]["mean"]) for k, _ in COLUMNS):
                     continue
-                lines.append(f"{var + tag + ' mean ± std':32s}{cells}")
+                lines.append(f"{var + tag + ' mean ± std':36s}{cells}")
         return "\n".join(lines)
 
     def to_json(self) -> dict:
