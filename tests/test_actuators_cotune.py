@@ -53,3 +53,28 @@ def test_cotune_lowers_the_velocity_loss_and_touches_only_the_target(drive):
     assert changed
     assert all(not p.requires_grad for p in chain.parameters())
     assert np.isfinite(rep.history).all()
+
+
+def test_cotune_keeps_the_best_all_window_weights_even_when_the_run_diverges():
+    camp = tiny_campaign()
+    trials = list(camp)[:4]
+    nss, _ = tiny_nss(camp, seed=3)
+    # an absurd learning rate: the minibatch run is pushed far off its start
+    cfg = tiny_config(cotune={"iters": 6, "lr": 5.0, "window": 1000, "burn_in": 0,
+                              "batch": 2, "eval_every": 2})
+    env = identify_envelope(trials, cfg.envelope)
+
+    def fit(name):
+        return fit_candidate(CandidateSpec.parse(name), trials, cfg, env)[0]
+
+    models = {"drive": fit("drive/lag1/cmd"), "brake": fit("brake/narx1s/cmd"),
+              "steering": fit("steering/lag1/cmd")}
+    chain = make_chain(nss, models, env)
+    rep = cotune(chain, "brake", trials, cfg.cotune)
+    steps = [s for s, _ in rep.evals]
+    assert steps == [0, 2, 4, 6]
+    values = dict(rep.evals)
+    assert rep.best_step in values
+    assert values[rep.best_step] == min(values.values())
+    assert values[rep.best_step] <= values[0]  # never worse than the start
+    assert max(values.values()) > values[0]  # the run did go astray: keeping the best mattered

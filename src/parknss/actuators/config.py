@@ -88,6 +88,9 @@ class CotuneConfig(StrictModel):
     )
     seed: int = 0
     loss: str = Field("mse", pattern="^(mse|mae)$")
+    eval_every: int = Field(
+        10, ge=1, description="steps between all-window evaluations; the best weights are kept"
+    )
 
 
 class LadderConfig(StrictModel):

@@ -8,7 +8,11 @@ Budget: trials are tiled into windows of ``window`` samples (the last end-aligne
 rolled out from its measured state and actuals at the window start; the first ``burn_in``
 samples of a window are not scored (the command histories fill from the first command).
 Each Adam step uses ``batch`` windows drawn at random (seeded), so a step costs a fixed
-number of samples whatever the campaign size; the weights after the last step are kept.
+number of samples whatever the campaign size. Every ``eval_every`` steps (and after the
+last) the loss over *all* windows is evaluated without gradients, and the weights with the
+lowest such loss are kept, the starting weights included, so co-tuning never leaves the
+submodel worse on its tuning data than it found it (a noisy minibatch run can otherwise
+end above its start).
 
 The NSS stays frozen: its parameters are never handed to the optimiser. Its fused Euler
 kernel computes the input gradient only when its parameters require gradients, so a
@@ -50,12 +54,15 @@ class CotuneReport:
     channel: str
     history: list[float] = field(default_factory=list)
     wall_s: float = 0.0
+    evals: list[tuple[int, float]] = field(default_factory=list)
+    best_step: int = 0
 
     def to_json(self) -> dict:
         h = self.history
         return {"channel": self.channel, "iters": len(h), "wall_s": self.wall_s,
                 "loss_first": h[0] if h else None,
-                "loss_last5_mean": float(np.mean(h[-5:])) if h else None}
+                "loss_last5_mean": float(np.mean(h[-5:])) if h else None,
+                "full_loss": [[s, v] for s, v in self.evals], "best_step": self.best_step}
 
 
 @dataclass
@@ -147,13 +154,29 @@ def cotune(
     rng = np.random.default_rng(cfg.seed)
     opt = torch.optim.Adam(target.parameters(), lr=cfg.lr)
     hist: list[float] = []
+    evals: list[tuple[int, float]] = []
+    best: tuple[float, int, dict] | None = None
     w = None
+
+    def full_loss() -> float:
+        with torch.no_grad():
+            return float(_loss(sur, w, np.arange(len(w.cmds)), cfg.loss))
+
+    def checkpoint(step: int) -> None:
+        nonlocal best
+        v = full_loss()
+        evals.append((step, v))
+        if best is None or v < best[0]:
+            best = (v, step, copy.deepcopy(target.state_dict()))
+
     try:
         for it in range(cfg.iters):
             if w is None or (cfg.refresh_every and it % cfg.refresh_every == 0 and need_ctx):
                 target.requires_grad_(False)
                 ctx = chain_predictions(chain.double(), trials) if need_ctx else None
                 w = make_windows(trials, cfg, ctx, frozen)
+                if best is None:
+                    checkpoint(0)
             target.requires_grad_(True)
             idx = rng.choice(len(w.cmds), size=min(cfg.batch, len(w.cmds)), replace=False)
             opt.zero_grad(set_to_none=True)
@@ -167,7 +190,16 @@ def cotune(
                          f"minibatch loss {lv:.5f} (km/h)^2")
             loss.backward()
             opt.step()
+            if (it + 1) % cfg.eval_every == 0 or it == cfg.iters - 1:
+                target.requires_grad_(False)
+                checkpoint(it + 1)
     finally:
         target.requires_grad_(False)
         target.eval()
-    return CotuneReport(channel, hist, time.perf_counter() - t0)
+    best_step = 0
+    if best is not None:
+        target.load_state_dict(best[2])
+        best_step = best[1]
+        if progress is not None:
+            progress(f"co-tune {channel}: kept step {best_step} (all-window loss {best[0]:.5f})")
+    return CotuneReport(channel, hist, time.perf_counter() - t0, evals, best_step)
