@@ -215,6 +215,11 @@ def test_a_scene_file_and_the_robustness_grid_are_planned(page, tmp_path):
     page.select_option("#cell", CELL)  # back to the grid cell
     page.select_option("#grid", "252")  # the same cell, first perturbation (skew +5°)
     page.wait_for_function("state.cells.length === 252")
+    # the page may plan the list's first cell while it repopulates the selector; wait for
+    # the plan of the kept cell (a page that never plans it times out and fails)
+    page.wait_for_function(
+        "state.plan !== null && state.plan.name === 'angled-left-t1-open-skew_pos'"
+    )
     _settled(page)
     assert page.evaluate("state.plan.name") == "angled-left-t1-open-skew_pos"
     assert page.url.endswith(f"?grid=252&cell={CELL}")
