@@ -130,9 +130,14 @@ def _report(doc: dict) -> None:
     for r in cl["runs"]:
         typer.echo(
             f"  {r['plant']:<10} completed {r['completed']!s:<5} goal error "
-            f"{r['goal_error_cm']} cm  heading {r['heading_error_deg']} deg  "
-            f"clearance {r['clearance_cm']} cm  duration {r['duration_s']} s"
+            f"{_num(r['goal_error_cm'], '.2f')} cm  heading "
+            f"{_num(r['heading_error_deg'], '.2f')} deg  clearance "
+            f"{_num(r['clearance_cm'], '.1f')} cm  duration {_num(r['duration_s'], '.1f')} s"
         )
+
+
+def _num(v, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
 
 
 def register(app: typer.Typer) -> None:
