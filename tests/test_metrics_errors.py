@@ -131,3 +131,14 @@ def test_missing_or_malformed_predictions():
         open_loop_errors(short, [A])
     with pytest.raises(DataError):
         open_loop_errors(p, [])
+
+
+def test_logged_and_truth_errors_gives_truth_only_when_every_trial_has_it():
+    from parknss.metrics.errors import logged_and_truth_errors, open_loop_errors
+    from test_nss_synth import make_trial
+
+    tr = make_trial(200)
+    pred = {tr.id: {ch: tr[ch] + 0.01 for ch in ("vx", "yaw_rate", "ax", "ay")}}
+    logged, truth = logged_and_truth_errors(pred, [tr])
+    assert truth is None  # a trial without truth_* channels
+    assert logged == open_loop_errors(pred, [tr]).to_json()

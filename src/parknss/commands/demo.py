@@ -32,12 +32,10 @@ def _log(msg: str) -> None:
 
 
 def _errors(predictions, trials, horizon) -> dict:
-    from parknss.metrics.errors import open_loop_errors
+    from parknss.metrics.errors import logged_and_truth_errors
 
-    out = {"logged": open_loop_errors(predictions, trials, horizon).to_json()}
-    if all(tr.has_truth() for tr in trials):
-        out["truth"] = open_loop_errors(predictions, trials, horizon, "truth").to_json()
-    return out
+    logged, truth = logged_and_truth_errors(predictions, trials, horizon)
+    return {"logged": logged} if truth is None else {"logged": logged, "truth": truth}
 
 
 def _line(tag: str, e: dict) -> str:

@@ -212,7 +212,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Open-loop errors of a model over whole trials (Fig. 5 for two maneuvers)."""
         from parknss.config import SHIPPED_NSS
-        from parknss.metrics.errors import open_loop_errors
+        from parknss.metrics.errors import logged_and_truth_errors
         from parknss.nss.campaigns import load_campaign
         from parknss.nss.checkpoint import load_model
         from parknss.nss.config import LimiterConfig
@@ -235,11 +235,7 @@ def register(app: typer.Typer) -> None:
             lim = LimiterConfig(enabled=True) if limiter else None
             predictions = predict_trials(loaded.model, trials, lim)
             horizon = loaded.training.get("window_length")
-        logged = open_loop_errors(predictions, trials, horizon).to_json()
-        has_truth = all(tr.has_truth() for tr in trials)
-        truth = (
-            open_loop_errors(predictions, trials, horizon, "truth").to_json() if has_truth else None
-        )
+        logged, truth = logged_and_truth_errors(predictions, trials, horizon)
         out.mkdir(parents=True, exist_ok=True)
         fig = draw_rollouts(
             pick_maneuvers(trials),

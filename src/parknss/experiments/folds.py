@@ -23,7 +23,7 @@ from typing import Any
 from parknss.data.splits import Fold, leave_r_out, stratified_folds
 from parknss.data.trial import Campaign
 from parknss.errors import ConfigError
-from parknss.metrics.errors import open_loop_errors
+from parknss.metrics.errors import logged_and_truth_errors
 from parknss.nss.campaigns import load_campaign
 from parknss.nss.config import NSSConfig, load_nss_config, with_overrides
 
@@ -81,13 +81,6 @@ def fold_config(config: str | None, overrides: dict | None) -> NSSConfig:
     return with_overrides(cfg, **(overrides or {}))
 
 
-def _evaluate(predictions: dict, trials: list, horizon: int | None) -> tuple[dict, dict | None]:
-    logged = open_loop_errors(predictions, trials, horizon).to_json()
-    has_truth = all(tr.has_truth() for tr in trials)
-    truth = open_loop_errors(predictions, trials, horizon, "truth").to_json() if has_truth else None
-    return logged, truth
-
-
 def fold_job(
     split: str = "cv",
     index: int = 0,
@@ -121,7 +114,7 @@ def fold_job(
         from parknss.nss.linear import LinearSSM
 
         lin = LinearSSM.fit(train)
-        logged, truth = _evaluate(lin.predict_trials(val), val, None)
+        logged, truth = logged_and_truth_errors(lin.predict_trials(val), val)
         return FoldResult(
             fold.name,
             index,
@@ -138,7 +131,7 @@ def fold_job(
 
     cfg = fold_config(config, overrides)
     res = fit(train, val, cfg, geometry_of(campaign), progress=progress)
-    logged, truth = _evaluate(predict_trials(res.model, val), val, res.window_length)
+    logged, truth = logged_and_truth_errors(predict_trials(res.model, val), val, res.window_length)
     h = res.history
     saved = None
     if save_dir is not None:

@@ -151,3 +151,17 @@ def per_trial_errors(
 ) -> dict[str, OpenLoopErrors]:
     """The same metrics trial by trial."""
     return {tr.id: open_loop_errors(predictions, [tr], horizon, reference) for tr in trials}
+
+
+def logged_and_truth_errors(
+    predictions: Mapping[str, Mapping[str, np.ndarray]],
+    trials: Iterable[Trial],
+    horizon: int | None = None,
+) -> tuple[dict, dict | None]:
+    """JSON errors against the logged channels, and against the truth channels when every
+    trial carries them (a synthetic campaign), else None."""
+    trials = list(trials)
+    logged = open_loop_errors(predictions, trials, horizon).to_json()
+    if not all(tr.has_truth() for tr in trials):
+        return logged, None
+    return logged, open_loop_errors(predictions, trials, horizon, "truth").to_json()
