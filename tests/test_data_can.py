@@ -19,7 +19,7 @@ from cantools.database.conversion import BaseConversion
 from parknss.cli import main
 from parknss.config import CONFIG_DIR
 from parknss.data.io import import_folder, read_campaign, read_trial, write_trial
-from parknss.data.mapping import load_mapping
+from parknss.data.mapping import load_mapping, resolve_dbc
 from parknss.errors import ConfigError, DataError, ParknssError
 from parknss.signals import DEG_PER_RAD, KMH_PER_MS, REQUIRED_CHANNELS
 
@@ -171,9 +171,9 @@ def _held(name: str, t: np.ndarray) -> np.ndarray:
 def test_signals_are_decoded_and_held_on_the_100hz_grid(drive):
     tr = drive
     t = tr["t"]
-    # BRK's first frame at 0.237 s: every signal received once from 0.24 s; the last
-    # frames at 6.0 s end it.
-    np.testing.assert_array_equal(t, np.arange(24, 601) / 100.0)
+    # BRK's first frame at 0.237 s: every signal received once from 0.24 s; BRK's last
+    # frame (0.237 + 115 * 0.05 = 5.987 s) ends it: nothing is held past a signal's end.
+    np.testing.assert_array_equal(t, np.arange(24, 599) / 100.0)
     assert set(tr.channels) == set(REQUIRED_CHANNELS)
     for name in SIGNALS:
         np.testing.assert_allclose(tr[name], _held(name, t), rtol=0, atol=1e-9, err_msg=name)
@@ -183,6 +183,7 @@ def test_signals_are_decoded_and_held_on_the_100hz_grid(drive):
         assert set(np.round(tr[name], 9)) <= set(np.round(sent, 9)), name
     prov = json.loads(tr.provenance)
     assert "'BRK'" in prov["start_limited_by"] and prov["span_s"][0] == pytest.approx(0.237)
+    assert "'BRK'" in prov["end_limited_by"] and prov["span_s"][1] == pytest.approx(5.987)
     assert prov["dbc"].endswith("vehicle.dbc") and prov["format"] in ("blf", "asc")
 
 
@@ -225,7 +226,7 @@ def test_bus_channel_filter_and_start_at_zero(tmp_path):
     doc["time"] = {"start_at_zero": True}
     mapping.write_text(yaml.safe_dump(doc))
     tr = read_trial(tmp_path / "logs" / "park_in_left_r1.blf", mapping)
-    assert tr["t"][0] == 0.0 and tr["t"][-1] == pytest.approx(5.76)
+    assert tr["t"][0] == 0.0 and tr["t"][-1] == pytest.approx(5.74)
     assert np.abs(tr["vx"]).max() > 1.4  # channel 1's zero frames were not mixed in
 
 
@@ -247,9 +248,26 @@ def test_can_logs_are_not_written(tmp_path):
         write_trial(tr, tmp_path / "x.blf")
 
 
-def test_dbc_path_is_relative_to_the_mapping_file():
-    m = load_mapping(EXAMPLE)
-    assert m.can.dbc == str(CONFIG_DIR / "vehicle.dbc")
+def test_dbc_path_is_found_beside_the_mapping_else_beside_the_log(tmp_path):
+    m = load_mapping(EXAMPLE)  # configs/vehicle.dbc does not exist: kept relative
+    assert m.can.dbc == "vehicle.dbc"
+    (tmp_path / "vehicle.dbc").write_text(vehicle_dbc().as_dbc_string())
+    local = tmp_path / "m.yaml"
+    local.write_text(EXAMPLE.read_text())
+    assert load_mapping(local).can.dbc == str(tmp_path / "vehicle.dbc")  # beside the mapping
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    (logs / "vehicle.dbc").write_text(vehicle_dbc().as_dbc_string())
+    found = resolve_dbc(m, logs / "park_in_left_r1.blf")  # beside the log
+    assert found.can.dbc == str(logs / "vehicle.dbc")
+
+
+def test_a_short_frame_is_masked_and_counted(tmp_path):
+    mapping = _short_frame(tmp_path / "logs")
+    tr = read_trial(tmp_path / "logs" / "park_in_left_r1.blf", mapping)
+    prov = json.loads(tr.provenance)
+    assert prov["short_frames"] == {"steer_cmd#0": 1}
+    assert tr.n == 575  # the other frames of the message still carry the signal
 
 
 # ------------------------------------------------------------------- malformed logs
@@ -345,7 +363,7 @@ MALFORMED: dict[str, tuple[Callable[[Path], Path], str, tuple[str, ...]]] = {
     "missing_dbc": (
         _missing_dbc,
         "park_in_left_r1.blf",
-        ("vehicle.dbc not found (can.dbc in the mapping)",),
+        ("DBC file vehicle.dbc not found (can.dbc in the mapping; looked for",),
     ),
     "no_dbc": (_no_dbc, "park_in_left_r1.blf", ("a CAN log needs a DBC: set can.dbc",)),
     "bad_dbc": (_bad_dbc, "park_in_left_r1.blf", ("vehicle.dbc: not readable",)),
@@ -376,22 +394,6 @@ MALFORMED: dict[str, tuple[Callable[[Path], Path], str, tuple[str, ...]]] = {
     "truncated_asc": (_truncated_asc, "park_in_left_r1.asc", ("truncated .asc log",)),
     "garbage_blf": (_garbage_blf, "park_in_left_r1.blf", ("not a readable .blf log",)),
     "unmapped": (_unmapped, "park_in_left_r1.blf", ("channel 'ay': not mapped",)),
-    "short_frame": (
-        _short_frame,
-        "park_in_left_r1.blf",
-        (
-            "channel 'steer_cmd' (message 'STR', signal 'StrWhlAngReq'): frame at t=1.01",
-            "Wrong data size",
-        ),
-    ),
-    "column_mapping": (
-        _column_mapping,
-        "park_in_left_r1.blf",
-        (
-            "channel 'vx': the mapping gives column 'VehSpd'; a CAN log needs 'message' and "
-            "'signal'",
-        ),
-    ),
 }
 
 

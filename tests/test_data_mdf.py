@@ -193,8 +193,8 @@ def test_file_units_are_used_without_a_mapping_unit_and_mapping_units_win(field,
     for name in REQUIRED_CHANNELS:
         np.testing.assert_allclose(tr[name], ref[name], rtol=0, atol=1e-12, err_msg=name)
     no_file_units = m.model_copy(update={"mdf": MdfOptions(match="wildcard", use_file_units=False)})
-    with pytest.raises(DataError, match=r"channel 'vx'.*plausible range"):
-        read_trial(path, no_file_units)  # km/h read as m/s
+    with pytest.raises(DataError, match=r"channel 'yaw_rate'.*plausible range"):
+        read_trial(path, no_file_units)  # deg/s read as rad/s
 
 
 def test_channel_search_modes_and_groups(field):
@@ -362,7 +362,7 @@ MALFORMED: dict[str, tuple[Callable[[Path], Path], tuple[str, ...]]] = {
         _unknown_file_unit,
         ("channel 'ax' (MDF channel 'AccX'): unit 'furlong/s^2' in the file",),
     ),
-    "gear_label": (_gear_label, ("channel 'gear'", "value 'N' at t=4.01 s is not in gear_values")),
+    "gear_label": (_gear_label, ("channel 'gear'", "value 'N' at t=4.005 s is not in gear_values")),
     "can_mapping": (_can_mapping, ("channel 'vx': the mapping gives a CAN message 'ESP'",)),
 }
 

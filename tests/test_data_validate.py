@@ -14,6 +14,7 @@ from parknss.data.validate import (
     validate_trial,
 )
 from parknss.errors import ConfigError, DataError
+from parknss.signals import DEG_PER_RAD, REQUIRED_CHANNELS
 from test_data_synth import kinematic_trial
 
 SRC = "logs/t3.csv"
@@ -84,7 +85,7 @@ def test_wrong_rate_reports_hz(good):
 def test_rate_within_tolerance_passes_outside_fails(good):
     jitter = np.random.default_rng(0).uniform(-0.4e-3, 0.4e-3, good.n)
     validate_trial(_with(good, t=good["t"] + jitter), SRC)
-    cfg = ValidationConfig(dt_tolerance_s=0.2e-3)
+    cfg = load_validation_config().model_copy(update={"dt_tolerance_s": 0.2e-3})
     with pytest.raises(DataError, match="channel 't'"):
         validate_trial(_with(good, t=good["t"] + jitter), SRC, cfg)
 
@@ -129,11 +130,11 @@ def test_non_integer_gear(good):
 
 
 def test_plausible_range(good):
-    vx = good["vx"] * 3.6  # km/h passed off as m/s: 2.88 fits, so scale further
-    vx = vx * 3.0
-    msg = _error(_with(good, vx=vx))
-    assert "channel 'vx':" in msg and "outside the plausible range [-5, 5] m/s" in msg
-    assert "worst -8.64 at t=7.00 s" in msg
+    yaw = good["yaw_rate"] * DEG_PER_RAD  # deg/s passed off as rad/s
+    msg = _error(_with(good, yaw_rate=yaw))
+    assert "channel 'yaw_rate':" in msg and "outside the plausible range [-3, 3] rad/s" in msg
+    k = int(np.argmax(np.abs(yaw)))
+    assert f"worst {yaw[k]:.6g} at t={good['t'][k]:.2f} s" in msg
 
 
 def test_unequal_lengths(good):
@@ -171,8 +172,8 @@ def test_absolute_time_hint(good):
 
 def test_validation_config_file_matches_defaults(tmp_path):
     shipped = yaml.safe_load((CONFIG_DIR / "data.yaml").read_text())["validation"]
-    assert ValidationConfig(**shipped) == ValidationConfig()
-    assert load_validation_config() == ValidationConfig()
+    assert ValidationConfig(**shipped) == load_validation_config()
+    assert set(load_validation_config().ranges) == set(REQUIRED_CHANNELS)  # one per channel
     bad = tmp_path / "data.yaml"
     bad.write_text("validation: {min_samples: 1}\n")
     with pytest.raises(ConfigError, match=r"field validation.min_samples"):

@@ -26,3 +26,10 @@ class CheckpointError(ParknssError):
 
 class PlanningError(ParknssError):
     """A scene or planning request is malformed (not: no plan found, which is a result)."""
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """A foreign exception as ``Type: message`` on one line (whitespace collapsed, cut at
+    ``limit`` characters), for the parenthesis of a ParknssError's message."""
+    text = " ".join(str(exc).split())
+    return f"{exc.__class__.__name__}: {text}"[:limit]

@@ -35,7 +35,7 @@ from parknss.actuators.select import (
     study_specs,
 )
 from parknss.actuators.spec import CHANNELS, CORE_ARCHS, CandidateSpec
-from parknss.data.splits import stratified_folds
+from parknss.data.splits import cv_plan
 from parknss.data.trial import Campaign, Trial
 from parknss.errors import ConfigError
 from parknss.nss.model import NSSModel
@@ -77,8 +77,9 @@ class Selection:
 
 
 def split(campaign: Campaign, cfg: ActuatorConfig) -> tuple[list[Trial], list[Trial]]:
-    """The selection split: stratified fold ``select.val_fold``."""
-    folds = stratified_folds(campaign)
+    """The selection split: fold ``select.val_fold`` of the CV plan (stratified, or plain
+    k-fold on a campaign that is not stratifiable: :func:`parknss.data.splits.cv_plan`)."""
+    folds = cv_plan(campaign).folds
     if cfg.select.val_fold >= len(folds):
         raise ConfigError(f"select.val_fold {cfg.select.val_fold}: only {len(folds)} folds")
     f = folds[cfg.select.val_fold]

@@ -28,18 +28,25 @@ def _log(msg: str) -> None:
     typer.echo(f"[actuators] {msg}", err=True)
 
 
-def _setup(nss: Path | None, data: Path | None, config: Path | None):
+def _campaign(data: Path | None, command: str):
+    """The campaign of ``parknss actuators <command>``, refused (one line) if it lacks a
+    channel the actuator chain needs (parknss.data.workflows)."""
+    from parknss.nss.campaigns import load_campaign
+
+    return load_campaign(data, "actuators", f"parknss actuators {command}")
+
+
+def _setup(nss: Path | None, data: Path | None, config: Path | None, command: str):
     import torch
 
     from parknss.actuators.config import load_actuator_config
     from parknss.config import SHIPPED_NSS
-    from parknss.nss.campaigns import load_campaign
     from parknss.nss.checkpoint import load_model
 
     torch.set_num_threads(1)
     cfg = load_actuator_config(config)
+    campaign = _campaign(data, command)
     loaded = load_model(nss or SHIPPED_NSS)
-    campaign = load_campaign(data)
     return cfg, loaded, campaign
 
 
@@ -82,7 +89,7 @@ def run_study_command(nss, data, out: Path, config) -> dict:
     from parknss.report.actuator_figures import autohold_mask, draw_fidelity, draw_replay
 
     t0 = time.perf_counter()
-    cfg, loaded, campaign = _setup(nss, data, config)
+    cfg, loaded, campaign = _setup(nss, data, config, "study")
     sel = run_selection(loaded.model, campaign, cfg, _log)
     co = run_cotune_study(loaded.model, sel, cfg, _log)
     pts = fidelity_points(sel)
@@ -167,13 +174,15 @@ def _winners(nss_model, campaign, cfg, selection: Path | None) -> tuple[dict, di
     return sel.winners(), sel.to_json()
 
 
-def run_build(nss, data, out: Path | None, config, selection, monolithic: bool) -> dict:
-    """Build the deployment (and optionally the monolithic row); write the artefact."""
+def run_build(nss, data, out: Path | None, config, selection, monolithic: bool,
+              command: str = "build") -> dict:
+    """Build the deployment (and optionally the monolithic row); write the artefact.
+    ``command`` ("build" or "ladder") names the command in error messages."""
     from parknss.actuators.deploy import build_deployment, monolithic_score
     from parknss.chain import save_chain
 
     t0 = time.perf_counter()
-    cfg, loaded, campaign = _setup(nss, data, config)
+    cfg, loaded, campaign = _setup(nss, data, config, command)
     winners, sel_doc = _winners(loaded.model, campaign, cfg, selection)
     dep = build_deployment(loaded.model, list(campaign), cfg, winners, _log)
     doc = {"nss": _nss_info(loaded), **dep.to_json()}
@@ -226,12 +235,11 @@ def run_stress_command(chain: Path | None, data: Path | None, config) -> dict:
     from parknss.actuators.stress import run_stress
     from parknss.chain import load_chain
     from parknss.config import SHIPPED_CHAIN
-    from parknss.nss.campaigns import load_campaign
 
     torch.set_num_threads(1)
     cfg = load_actuator_config(config)
+    campaign = _campaign(data, "stress")
     dep = load_chain(chain or SHIPPED_CHAIN)
-    campaign = load_campaign(data)
     tr = next((t for t in campaign if t.maneuver.startswith("park_in")), campaign[0])
     rows = run_stress(dep, tr, cfg.stress)
     return {"chain": str(chain or SHIPPED_CHAIN), "trial": tr.id,
@@ -288,7 +296,8 @@ def register(app: typer.Typer) -> None:
         as_json: bool = json_opt,
     ) -> None:
         """Table IV: every row measured on every trial."""
-        emit(run_build(nss, data, save, config, selection, True), as_json, print_ladder)
+        emit(run_build(nss, data, save, config, selection, True, "ladder"), as_json,
+             print_ladder)
 
     @sub.command("build")
     def build(

@@ -119,12 +119,17 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(Path("runs/cv"), "--out", help="Run folder."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON document."),
     ) -> None:
-        """Table II: stratified 4-fold CV of the NSS and two baselines on the same folds."""
+        """Table II: stratified 4-fold CV of the NSS and two baselines on the same folds
+        (plain 4-fold, with a note, when the campaign is not stratifiable)."""
+        from parknss.data.splits import cv_plan
         from parknss.experiments.cv import run_cv
         from parknss.nss.campaigns import load_campaign
 
         overrides = parse_overrides(set_, epochs, seed)
-        campaign = load_campaign(data)  # validates the folder before any job starts
+        # validates the folder and its channels before any job starts
+        campaign = load_campaign(data, "nss", "parknss cv")
+        plan = cv_plan(campaign)  # stratified, or plain k-fold (says why in plan.note)
+        _log(plan.note)
         out.mkdir(parents=True, exist_ok=True)
         res = run_cv(
             data=str(data) if data else None,
@@ -136,6 +141,7 @@ def register(app: typer.Typer) -> None:
             address=address,
             cache_dir=out / "cache",
             save_dir=out / "models",
+            plan=plan,
         )
         doc = res.to_json()
         doc["figures"] = _cv_figures(res, campaign, out)
@@ -165,7 +171,7 @@ def register(app: typer.Typer) -> None:
         from parknss.report.nss_figures import draw_history
 
         cfg = fold_config(str(config) if config else None, parse_overrides(set_, epochs, seed))
-        campaign = load_campaign(data)
+        campaign = load_campaign(data, "nss", "parknss train")
         out.mkdir(parents=True, exist_ok=True)
         (out / "config.json").write_text(json.dumps(cfg.model_dump(mode="json"), indent=2))
         res = fit(
@@ -219,11 +225,12 @@ def register(app: typer.Typer) -> None:
         from parknss.nss.predict import predict_trials
         from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
 
-        campaign = load_campaign(data)
+        if chain is not None and (model is not None or limiter):
+            raise ConfigError("--chain cannot be combined with --model or --limiter")
+        # a chain rolls out from the logged commands; a model from the logged actuals
+        campaign = load_campaign(data, "rate" if chain is not None else "nss", "parknss evaluate")
         trials = list(campaign)
         if chain is not None:
-            if model is not None or limiter:
-                raise ConfigError("--chain cannot be combined with --model or --limiter")
             from parknss.chain import load_chain
 
             source = str(chain)

@@ -66,6 +66,19 @@ def model_pairs(campaign, predictions, channels, model) -> dict:
     return pairs
 
 
+def check_channels(campaign, rated, replay_truth: bool, chain: bool, data: Path) -> None:
+    """Refuse (one DataError line) a campaign that lacks what the mode reads: a chain the
+    ``rate`` workflow's channels, a model the ``nss`` ones, the truth replay the rated
+    channels (parknss.data.workflows)."""
+    from parknss.data.workflows import require, require_channels
+
+    where = f"parknss rate --data {data}"
+    if replay_truth:
+        require_channels(campaign, tuple(rated), "rating the truth replay", where)
+    else:
+        require(campaign, "rate" if chain else "nss", where)
+
+
 def run_rate(
     data: Path,
     model: Path | None,
@@ -84,6 +97,7 @@ def run_rate(
         raise ParknssError("give exactly one of --model M, --chain C or --replay-truth")
     cfg = load_config(RateConfig, config)
     campaign = read_campaign(data)
+    check_channels(campaign, cfg.channels, replay_truth, chain is not None, data)
     if replay_truth:
         pairs = truth_pairs(campaign, cfg.channels)
         source = {"mode": "replay-truth", "data": str(data)}

@@ -10,6 +10,10 @@ Studies that judge effects against the seed-noise floor take it from ``--floor``
 CVs, labelled as such) or a seed-noise JSON written by ``parknss study seed-noise``.
 ``parknss study estimate`` counts each study's fits and epochs and converts them to CPU
 hours with a measured paper-size seconds-per-epoch.
+
+Every study refuses, in one line, a campaign that lacks a channel NSS identification needs
+(:mod:`parknss.data.workflows`), and says in ``note`` when the campaign is not
+stratifiable and its folds are plain k-fold (:mod:`parknss.data.splits`).
 """
 
 from __future__ import annotations
@@ -25,6 +29,25 @@ STUDIES = ("learning-curve", "seed-noise", "ablations", "limiter", "convergence"
 
 def _log(msg: str) -> None:
     typer.echo(f"[study] {msg}", err=True)
+
+
+def checked_campaign(data: Path | None, command: str):
+    """The study's campaign, refused (DataError, one line) if it lacks an NSS channel."""
+    from parknss.nss.campaigns import load_campaign
+
+    return load_campaign(data, "nss", command)
+
+
+def fold_note(name: str, campaign, cfg) -> tuple[bool, str]:
+    """(stratified, note) of the folds the study ``name`` fits on ``campaign``."""
+    if name == "learning-curve":
+        from parknss.experiments.learning_curve import grid_note
+
+        return grid_note(campaign, cfg.learning_curve_rs)
+    from parknss.data.splits import cv_plan
+
+    plan = cv_plan(campaign)
+    return plan.stratified, plan.note
 
 
 def _floor(spec: str, cfg, quick: bool, sweep):
@@ -62,6 +85,9 @@ def run_study(
     if name not in STUDIES:
         raise ConfigError(f"unknown study {name!r}; one of {', '.join(STUDIES)}")
     cfg = load_experiments_config(config)
+    stratified, note = fold_note(name, checked_campaign(data, f"parknss study {name}"), cfg)
+    if progress:
+        _log(note)
     out.mkdir(parents=True, exist_ok=True)
     sweep = Sweep(executor, workers, address, out / "cache", str(data) if data else None, progress)
     t0 = time.perf_counter()
@@ -114,6 +140,8 @@ def run_study(
         ],
         "figure": str(figure),
         "config": cfg.model_dump(mode="json"),
+        "stratified": stratified,
+        "note": note,
     }
     path = out / f"{name}.json"
     path.write_text(json.dumps(doc, indent=2, default=str))
@@ -131,6 +159,7 @@ def estimate(quick: bool, config: Path | None, data: Path | None, sec_per_epoch:
     from parknss.experiments.sweep import Sweep
 
     cfg = load_experiments_config(config)
+    checked_campaign(data, "parknss study estimate")
     b = cfg.budget(quick)
     if sec_per_epoch is None:
         from parknss.experiments.folds import fold_job
@@ -203,6 +232,8 @@ def register(app: typer.Typer) -> None:
             if as_json:
                 typer.echo(json.dumps(doc, indent=2, default=str))
                 return
+            if not doc["stratified"]:
+                typer.echo(doc["note"] + "\n")
             for t in tables:
                 typer.echo(text_table(t) + "\n")
             for f in doc["findings"]:

@@ -1,223 +1,245 @@
-"""CAN logs (.blf, .asc) with a DBC: python-can reads frames, cantools decodes signals.
+"""CAN bus logs with a DBC: frames read column-wise, signals decoded vectorised.
 
-The mapping names the DBC (``can.dbc``) and, for every schema channel, the ``message``
-and ``signal`` that carry it. Frames are read with python-can's BLFReader/ASCReader
-(error and remote frames skipped; ``can.bus_channel`` keeps one bus), time counted from
-the log's first frame. Each mapped signal becomes a :class:`~parknss.data.resample.
-Series` of its decoded values at the frame times (enumerated signals as their DBC
-labels) and goes onto the 100 Hz grid by zero-order hold of the last received value
-(:mod:`parknss.data.resample`: the trial starts when every signal has been received
-once and ends at the last frame of any mapped signal). Units come from the mapping, else from the
-DBC (``can.use_file_units``), converted by the channel mapping. Every problem is a
-one-line DataError naming the file and the channel.
+The mapping names the DBC (``can.dbc``) and, per schema channel, the ``message`` and
+``signal`` that carry it. :func:`read_can_series` reads the frames of those messages
+(:mod:`parknss.data.canframes`: .blf, .asc, candump .log, SavvyCAN GVRET .csv, MDF4 bus
+logging; error and remote frames skipped), keeps one bus (``can.bus_channel``) or one
+bus per message (``can.duplicate_buses: first``: frames a gateway forwards onto several
+buses are kept once), decodes each requested signal for all its frames at once
+(:func:`parknss.data.dbc.decode_signal`: value tables as labels, multiplexed signals
+only from the frames that carry them, frames too short for a signal skipped and
+counted) and returns one :class:`~parknss.data.resample.Series` per request, with time
+counted from the log's first frame (any bus, any id). Every problem is a one-line
+DataError naming the file and the channel.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from parknss.data.mapping import ChannelMapping
-from parknss.data.resample import TIME_KEY, BusLog, Series, to_raw, unique_key
+from parknss.data.canframes import (
+    KINDS,
+    FrameTable,
+    buses_by_key,
+    drop_duplicate_buses,
+    frame_key,
+    keep_bus,
+    read_frames,
+)
+from parknss.data.dbc import LoadedDbc, bytes_needed, decode_signal, load_dbc, similar_hint
+from parknss.data.mapping import CanOptions
+from parknss.data.resample import Series
 from parknss.errors import DataError
-from parknss.signals import CHANNELS
 
-CAN_SUFFIXES: tuple[str, ...] = (".blf", ".asc")
-ASC_TAIL_BYTES = 4096  # how much of an .asc file's end is read to find its closing line
-
-
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return f"{exc.__class__.__name__}: {text}"[:300]
+CAN_SUFFIXES: tuple[str, ...] = (".blf", ".asc")  # CAN by suffix alone (also: .log, see canframes)
 
 
 @dataclass(frozen=True)
-class _Source:
-    """One mapped schema channel: its DBC message and signal."""
+class CanRequest:
+    """One signal to decode for a schema channel.
 
+    Attributes:
+        key: unique raw key of the series, e.g. ``vx#0``.
+        channel: the schema channel it feeds.
+        message: message name in the DBC.
+        signal: signal name in that message.
+        label: how messages name it, e.g. ``channel 'vx' (message 'ESP', signal 'VehSpd')``.
+    """
+
+    key: str
     channel: str
-    message: Any  # cantools Message
-    signal: Any  # cantools Signal
+    message: str
+    signal: str
     label: str
 
+
+@dataclass(frozen=True)
+class _Resolved:
+    request: CanRequest
+    message: Any  # cantools Message
+    signal: Any  # cantools Signal
+
     @property
-    def frame_key(self) -> tuple[int, bool]:
-        return int(self.message.frame_id), bool(self.message.is_extended_frame)
+    def frame_key(self) -> int:
+        return frame_key(self.message.frame_id, self.message.is_extended_frame)
 
 
-def _load_dbc(path: Path, m: ChannelMapping) -> Any:
-    if m.can.dbc is None:
+def _dbc(path: Path, can: CanOptions) -> LoadedDbc:
+    if can.dbc is None:
         raise DataError(f"{path}: a CAN log needs a DBC: set can.dbc in the mapping")
-    dbc = Path(m.can.dbc)
+    dbc = Path(can.dbc)
     if not dbc.is_file():
         raise DataError(f"{path}: DBC file {dbc} not found (can.dbc in the mapping)")
     try:
-        import can  # noqa: F401  (python-can, used by _frames)
-        import cantools
-    except ImportError as exc:  # pinned dependencies; only a broken install lacks them
-        raise DataError(f"{path}: reading CAN logs needs cantools and python-can ({exc})") from exc
+        return load_dbc(dbc, strict=can.strict_dbc)
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from None
+
+
+def _resolve(dbc: LoadedDbc, r: CanRequest, path: Path) -> _Resolved:
+    """The request's message and signal in the DBC; DataError with close names if absent."""
+    name = dbc.path.name
     try:
-        db = cantools.database.load_file(dbc)
-    except Exception as exc:  # cantools raises many types for bad files
-        raise DataError(f"{path}: DBC file {dbc}: not readable ({_one_line(exc)})") from exc
-    if not hasattr(db, "get_message_by_name"):
-        raise DataError(f"{path}: DBC file {dbc}: not a CAN database")
-    return db
-
-
-def _sources(db: Any, m: ChannelMapping, path: Path) -> list[_Source]:
-    """Every schema channel's message and signal, checked against the DBC."""
-    dbc = Path(str(m.can.dbc)).name
-    out = []
-    for ch in CHANNELS[1:]:
-        src = m.channels.get(ch.name)
-        if src is None:
-            raise DataError(
-                f"{path}: channel {ch.name!r}: not mapped (a CAN log needs "
-                f"channels.{ch.name}.message and .signal in the mapping)"
-            )
-        if src.message is None or src.signal is None:
-            raise DataError(
-                f"{path}: channel {ch.name!r}: the mapping gives {src.describe()}; a CAN log "
-                "needs 'message' and 'signal'"
-            )
-        label = f"channel {ch.name!r} (message {src.message!r}, signal {src.signal!r})"
-        try:
-            msg = db.get_message_by_name(src.message)
-        except KeyError:
-            raise DataError(f"{path}: {label}: message not in the DBC {dbc}") from None
-        try:
-            sig = msg.get_signal_by_name(src.signal)
-        except KeyError:
-            raise DataError(
-                f"{path}: {label}: signal not in message {src.message!r} of the DBC {dbc}"
-            ) from None
-        out.append(_Source(ch.name, msg, sig, label))
-    return out
-
-
-def _check_asc_end(path: Path) -> None:
-    """An .asc log closes with 'End TriggerBlock'; without it the file was cut off."""
-    with open(path, "rb") as f:
-        f.seek(max(0, path.stat().st_size - ASC_TAIL_BYTES))
-        tail = f.read().decode("latin-1")
-    lines = [ln.strip() for ln in tail.splitlines() if ln.strip()]
-    if not lines or not lines[-1].lower().startswith("end triggerblock"):
-        raise DataError(f"{path}: truncated .asc log (no closing 'End TriggerBlock' line)")
-
-
-def _frames(path: Path, wanted: set[tuple[int, bool]], bus: int | None):
-    """(time of the first frame, {frame key: [(timestamp, data), ...]}) in file order."""
-    import can
-
-    kind = path.suffix.lower()
-    if kind == ".asc":
-        _check_asc_end(path)
-    reader = None
+        msg = dbc.message(r.message)
+    except KeyError:
+        hint = similar_hint(r.message, dbc.message_names())
+        raise DataError(f"{path}: {r.label}: message not in the DBC {name}{hint}") from None
     try:
-        reader = can.BLFReader(str(path)) if kind == ".blf" else can.ASCReader(str(path))
-        if kind == ".blf" and reader.file_size > path.stat().st_size:
+        sig = msg.get_signal_by_name(r.signal)
+    except KeyError:
+        hint = similar_hint(r.signal, [s.name for s in msg.signals])
+        raise DataError(
+            f"{path}: {r.label}: signal not in message {r.message!r} of the DBC {name}{hint}"
+        ) from None
+    return _Resolved(r, msg, sig)
+
+
+def _select_buses(
+    frames: FrameTable, resolved: list[_Resolved], can: CanOptions, path: Path
+) -> tuple[FrameTable, dict]:
+    """Apply can.bus_channel and can.duplicate_buses; (frames kept, provenance entries)."""
+    seen = buses_by_key(frames)
+    names = {r.frame_key: r.message.name for r in resolved}
+    for r in resolved:
+        if r.frame_key not in seen:
             raise DataError(
-                f"{path}: truncated .blf log (header says {reader.file_size} bytes, the file "
-                f"has {path.stat().st_size})"
+                f"{path}: {r.request.label}: no frames of the message "
+                f"(id 0x{r.message.frame_id:X}) in the log"
             )
-        t0 = None
-        frames: dict[tuple[int, bool], list] = defaultdict(list)
-        for msg in reader:
-            if t0 is None:
-                t0 = float(msg.timestamp)
-            if msg.is_error_frame or msg.is_remote_frame:
-                continue
-            if bus is not None and msg.channel != bus:
-                continue
-            key = (int(msg.arbitration_id), bool(msg.is_extended_id))
-            if key in wanted:
-                frames[key].append((float(msg.timestamp), bytes(msg.data)))
-    except DataError:
-        raise
-    except Exception as exc:  # python-can raises struct.error, BLFParseError, ValueError...
-        raise DataError(
-            f"{path}: not a readable {kind} log, corrupt or truncated ({_one_line(exc)})"
-        ) from exc
-    finally:
-        if reader is not None:
-            reader.stop()
-    if t0 is None:
-        raise DataError(f"{path}: no CAN frames in the log")
-    return t0, frames
+        if can.bus_channel is not None and can.bus_channel not in seen[r.frame_key]:
+            on = ", ".join(str(b) for b in sorted(seen[r.frame_key]))
+            raise DataError(
+                f"{path}: {r.request.label}: no frames of the message "
+                f"(id 0x{r.message.frame_id:X}) on bus {can.bus_channel} (can.bus_channel); "
+                f"the log has it on bus {on}"
+            )
+    prov: dict[str, Any] = {}
+    if can.bus_channel is not None:
+        frames = keep_bus(frames, can.bus_channel)
+        dropped = {names[k]: sum(c.values()) - c.get(can.bus_channel, 0) for k, c in seen.items()}
+        prov["frames_of_other_buses_dropped"] = {k: n for k, n in dropped.items() if n}
+        kept = {names[k]: can.bus_channel for k in seen}
+    elif can.duplicate_buses == "first":
+        frames, choices = drop_duplicate_buses(frames)
+        kept = {names[k]: next(iter(c)) for k, c in seen.items()}
+        kept |= {names[c.key]: c.kept for c in choices}
+        prov["duplicates_dropped"] = {names[c.key]: c.dropped for c in choices}
+    else:
+        kept = {names[k]: sorted(c) if len(c) > 1 else next(iter(c)) for k, c in seen.items()}
+    prov["bus_kept"] = kept
+    return frames, prov
 
 
-def _decode_all(src: _Source, frames: list, t0: float, path: Path) -> list[tuple[float, dict]]:
-    """Every frame of the source's message decoded: (s from the first frame, signals)."""
-    if not frames:
-        raise DataError(
-            f"{path}: {src.label}: no frames of the message (id 0x{src.frame_key[0]:X}) in the log"
+def _check_time(s: Series, name: str, buses: dict[int, int], path: Path) -> None:
+    """Time stamps never go backwards; naming the fix when several buses are mixed."""
+    dt = np.diff(s.t)
+    back = np.flatnonzero(dt < 0.0)
+    if not len(back):
+        return
+    k = int(back[0])
+    hint = ""
+    if len(buses) > 1:
+        hint = (
+            f"; message {name!r} arrives on buses {' and '.join(map(str, sorted(buses)))}: "
+            "set can.bus_channel or can.duplicate_buses: first"
         )
-    out = []
-    for ts, data in frames:
-        try:
-            out.append((ts - t0, src.message.decode(data, decode_choices=True, scaling=True)))
-        except Exception as exc:  # cantools DecodeError, struct errors on short frames
-            raise DataError(
-                f"{path}: {src.label}: frame at t={ts - t0:.6f} s cannot be decoded "
-                f"({_one_line(exc)})"
-            ) from exc
-    return out
-
-
-def _decoded(src: _Source, decoded: list[tuple[float, dict]], path: Path) -> Series:
-    """The signal's values at its message's frame times (s from the first frame)."""
-    name = src.signal.name
-    # multiplexed signals are absent from the frames of other multiplexer values
-    times = [t for t, sigs in decoded if name in sigs]
-    values = [sigs[name] for _, sigs in decoded if name in sigs]
-    if not values:
-        raise DataError(f"{path}: {src.label}: no frame carries the signal")
-    if all(isinstance(v, int | float) for v in values):
-        arr = np.asarray(values, dtype=np.float64)
-    else:  # enumerated: labels where the DBC has one, numbers as text otherwise
-        arr = np.array([str(getattr(v, "name", v)) for v in values], dtype=object)
-    return Series(
-        src.channel,
-        f"{src.message.name}.{src.signal.name}",
-        src.label,
-        np.asarray(times, dtype=np.float64),
-        arr,
-        hold=True,
-        unit=src.signal.unit or "",
+    raise DataError(
+        f"{path}: {s.label}: non-monotonic time stamps, {len(back)} steps backwards (first "
+        f"from t={s.t[k]:.6f} s to t={s.t[k + 1]:.6f} s){hint}"
     )
 
 
-def read_can(path: Path, m: ChannelMapping) -> BusLog:
-    """Read one CAN log: mapped signals decoded and held onto the 100 Hz grid.
+def _series(r: _Resolved, frames: FrameTable, t0: float, path: Path) -> tuple[Series, int]:
+    """The request's signal from its message's frames: (Series, frames too short)."""
+    dec = decode_signal(r.message, r.signal, frames.data, frames.dlc)
+    if not dec.mask.any():
+        why = (
+            f"{dec.n_short} of {len(frames)} frames are shorter than the "
+            f"{bytes_needed(r.signal)} bytes it needs"
+            if dec.n_short
+            else f"the multiplexer {r.signal.multiplexer_signal!r} never selects it in "
+            f"{len(frames)} frames"
+        )
+        raise DataError(f"{path}: {r.request.label}: no frame carries the signal ({why})")
+    rows = np.flatnonzero(dec.mask)
+    return (
+        Series(
+            r.request.channel,
+            r.request.key,
+            r.request.label,
+            frames.t[rows] - t0,
+            dec.values[rows],
+            hold=True,
+            unit=r.signal.unit or "",
+            event=bool(r.signal.choices),  # enumerations are often sent on change only
+        ),
+        dec.n_short,
+    )
+
+
+def read_can_series(
+    path: Path, requests: list[CanRequest], can: CanOptions
+) -> tuple[list[Series], dict]:
+    """Decode the requested signals of one CAN bus log.
 
     Args:
-        path: an existing, non-empty .blf or .asc file.
-        m: the channel mapping (``can``, ``channels`` with message/signal, ``resample``,
-            ``time.start_at_zero``).
+        path: a .blf, .asc, candump .log, GVRET .csv or MDF4 bus-logging file.
+        requests: the signals to decode (unique keys).
+        can: the mapping's CAN options (dbc, bus_channel, strict_dbc, duplicate_buses).
 
     Returns:
-        A BusLog: raw columns (grid time in s from the first frame, signal values (T,) in
-        DBC units), the mapping that converts them, provenance.
+        (one Series per request, in order: t in s from the log's first frame (float64
+        (N,)), values in the DBC unit (float64, or str labels for value-table signals),
+        hold=True, unit = the DBC unit or '', event = the signal has a value table;
+        provenance: format, dbc, dbc_warnings, log_t0_s (the first frame's time stamp on
+        the logger's clock),
+        frames_read, frames_skipped (error/remote), frames_mapped, bus_kept per message,
+        duplicates_dropped (or frames_of_other_buses_dropped), short_frames per key).
+
+    Raises:
+        DataError: one line naming the file and the channel (or the DBC).
     """
-    db = _load_dbc(path, m)
-    sources = _sources(db, m, path)
-    t0, frames = _frames(path, {s.frame_key for s in sources}, m.can.bus_channel)
-    taken: set[str] = {TIME_KEY}
-    series = []
-    by_message: dict[tuple[int, bool], list[tuple[float, dict]]] = {}
-    for src in sources:
-        if src.frame_key not in by_message:  # decode each message's frames once
-            by_message[src.frame_key] = _decode_all(src, frames.get(src.frame_key, []), t0, path)
-        s = _decoded(src, by_message[src.frame_key], path)
-        mode = m.channels[src.channel].interpolation
-        hold = mode != "linear"  # CAN signals are event-based: held unless asked
-        key = unique_key(s.key, s.channel, taken)
-        series.append(Series(s.channel, key, s.label, s.t, s.values, hold, s.unit))
-    log = to_raw(series, m, str(path), path.suffix.lower()[1:], m.can.use_file_units)
-    log.provenance["dbc"] = str(m.can.dbc)
-    return log
+    keys = [r.key for r in requests]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"request keys must be unique: {keys}")
+    dbc = _dbc(path, can)
+    resolved = [_resolve(dbc, r, path) for r in requests]
+    wanted = {(int(r.message.frame_id), bool(r.message.is_extended_frame)) for r in resolved}
+    frames = read_frames(path, wanted)  # the reader by content, else by suffix
+    t0 = frames.t_first
+    frames, bus_prov = _select_buses(frames, resolved, can, path)
+    seen = buses_by_key(frames)
+    keys_of = frames.keys()
+    order = np.argsort(keys_of, kind="stable")  # rows of each message, in file order
+    uniq, first = np.unique(keys_of[order], return_index=True)
+    bounds = dict(
+        zip(uniq.tolist(), zip(first, [*first[1:], len(order)], strict=True), strict=True)
+    )
+    by_message: dict[int, FrameTable] = {}
+    series, short = [], {}
+    for r in resolved:
+        if r.frame_key not in by_message:
+            lo, hi = bounds[r.frame_key]
+            by_message[r.frame_key] = frames.take(order[lo:hi])
+        s, n_short = _series(r, by_message[r.frame_key], t0, path)
+        _check_time(s, r.message.name, seen[r.frame_key], path)
+        series.append(s)
+        if n_short:
+            short[r.request.key] = n_short
+    provenance = {
+        "format": frames.kind,
+        "format_name": KINDS[frames.kind],
+        "dbc": str(dbc.path),
+        "dbc_warnings": list(dbc.warnings),
+        "log_t0_s": t0,
+        "frames_read": frames.n_frames,
+        "frames_skipped": frames.n_skipped,
+        "frames_mapped": int(sum(len(f) for f in by_message.values())),
+        **bus_prov,
+        "short_frames": short,
+    }
+    return series, provenance

@@ -14,9 +14,11 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import math
 import os
 import re
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,38 +28,52 @@ import scipy.io
 from pydantic import Field, ValidationError
 
 from parknss.config import StrictModel
-from parknss.data.canlog import CAN_SUFFIXES, read_can
+from parknss.data.assemble import Assembled, LogRead, assemble
+from parknss.data.canlog import CAN_SUFFIXES
 from parknss.data.mapping import (
     ChannelMapping,
     Column,
     CsvOptions,
-    apply_mapping,
     as_mapping,
+    iter_sources,
     mapping_hint,
+    resolve_dbc,
+    source_key,
+    source_label,
 )
 from parknss.data.mdf import MDF_SUFFIXES, read_mdf, write_mdf
-from parknss.data.resample import BusLog
-from parknss.data.trial import Campaign, Trial
-from parknss.data.validate import TrialDataError, validate_trial
-from parknss.errors import DataError
-from parknss.signals import REQUIRED_CHANNELS, SAMPLE_RATE_HZ, SCHEMA_VERSION
+from parknss.data.meta import META_KEY, parse_meta
+from parknss.data.resample import Series
+from parknss.data.trial import UNLABELLED, Campaign, Trial
+from parknss.data.validate import TrialDataError, load_validation_config, validate_trial
+from parknss.data.workflows import campaign_channels
+from parknss.errors import DataError, one_line
+from parknss.signals import (
+    CHANNEL_BY_NAME,
+    REQUIRED_CHANNELS,
+    SAMPLE_RATE_HZ,
+    SCHEMA_VERSION,
+    TRUTH_PREFIX,
+    convert_to_schema,
+)
 from parknss.vehicle import VehicleGeometry
 
 CAMPAIGN_JSON = "campaign.json"
 CAMPAIGN_FORMAT = "parknss-campaign"
-META_KEY = "parknss_trial"  # trial metadata: Parquet schema key, CSV comment, .mat variable
 MANIFEST = "manifest.csv"
-LOG_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".pq", ".mat", *MDF_SUFFIXES, *CAN_SUFFIXES)
-LOG_KINDS = ".csv, .parquet, .mat, .mf4/.mdf (MDF4) or .blf/.asc (CAN)"
+CAN_TRACE_SUFFIXES: tuple[str, ...] = tuple(dict.fromkeys((*CAN_SUFFIXES, ".log")))
+LOG_SUFFIXES: tuple[str, ...] = (
+    ".csv", ".parquet", ".pq", ".mat", *MDF_SUFFIXES, *CAN_TRACE_SUFFIXES
+)
+LOG_KINDS = (
+    ".csv (table or SavvyCAN GVRET), .parquet, .mat, .mf4/.mdf (MDF4, decoded or bus logging) "
+    "or .blf/.asc/.log (CAN)"
+)
 _NAME_RE = re.compile(r"^(?P<cls>[A-Za-z][A-Za-z0-9_]*?)_r(?P<rep>[0-9]+)$")
 _SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 Raw = tuple[dict[str, Column], dict]
 
-
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return f"{exc.__class__.__name__}: {text}"[:300]
 
 
 def _rows(i: int) -> str:
@@ -97,20 +113,114 @@ def _trial_meta(trial: Trial) -> dict:
     }
 
 
-def _parse_meta(text: str | bytes, source: Path) -> dict:
-    try:
-        meta = json.loads(text)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{source}: trial metadata {META_KEY!r} is not valid JSON") from exc
-    if not isinstance(meta, dict):
-        raise DataError(f"{source}: trial metadata {META_KEY!r} is not a JSON object")
-    version = str(meta.get("schema_version", SCHEMA_VERSION))
-    if version != SCHEMA_VERSION:
+# ------------------------------------------------------------------- table logs
+
+
+def parse_numbers(
+    col: Column, label: str, source: str, decimal: str = ".", as_nan: frozenset = frozenset()
+) -> np.ndarray:
+    """Raw values (numbers or text) -> float64; text that is not a number is an error.
+
+    ``nan``/``inf`` text parses (the assembly reports it unless the mapping masks it);
+    text listed in ``as_nan`` (the channel's text sentinels, e.g. ``""``) becomes NaN;
+    an empty field or other text raises DataError naming the first offending value.
+    """
+    v = col.values
+    if v.dtype.kind in "biuf":
+        return v.astype(np.float64)
+    text = [str(x).strip() for x in v]
+    if decimal != ".":
+        text = [x.replace(decimal, ".") for x in text]
+    out = np.empty(len(text), dtype=np.float64)
+    bad = []
+    for i, x in enumerate(text):
+        if x in as_nan:
+            out[i] = np.nan
+            continue
+        try:
+            out[i] = float(x)
+        except ValueError:
+            bad.append(i)
+    if bad:
+        i = bad[0]
+        what = "empty value" if text[i] == "" else f"non-numeric value {str(v[i]).strip()!r}"
         raise DataError(
-            f"{source}: written with schema version {version!r}, this parknss reads "
-            f"{SCHEMA_VERSION!r}"
+            f"{source}: {label}: {what} at {col.locate(i)} ({len(bad)} non-numeric values)"
         )
-    return meta
+    return out
+
+
+def _check_table_time(t: np.ndarray, col: Column, source: str) -> None:
+    """The time column: finite, never repeated, never going backwards (one line each)."""
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise DataError(
+            f"{source}: channel 't': {len(bad)} non-finite time stamps (first at "
+            f"{col.locate(int(bad[0]))})"
+        )
+    dt = np.diff(t)
+    dup = np.flatnonzero(dt == 0.0)
+    if len(dup):
+        raise DataError(
+            f"{source}: channel 't': {len(dup)} duplicate timestamps (first at "
+            f"t={t[int(dup[0])]:.2f} s)"
+        )
+    back = np.flatnonzero(dt < 0.0)
+    if len(back):
+        k = int(back[0])
+        raise DataError(
+            f"{source}: channel 't': time goes backwards at {len(back)} steps (first from "
+            f"t={t[k]:.2f} s to t={t[k + 1]:.2f} s); sort the log by time"
+        )
+
+
+def table_read(raw: dict[str, Column], meta: dict, m: ChannelMapping, path: Path, fmt: str):
+    """Columns of a CSV/Parquet/.mat log -> the series of every mapped source."""
+    source = str(path)
+    tsrc = m.time
+    if tsrc.column not in raw:
+        raise DataError(
+            f"{source}: channel 't': time column {tsrc.column!r} not found "
+            f"(columns: {', '.join(raw)})"
+        )
+    tlabel = "channel 't'" + (f" (column {tsrc.column!r})" if tsrc.column != "t" else "")
+    t = parse_numbers(raw[tsrc.column], tlabel, source, m.csv.decimal)
+    t = convert_to_schema(t, tsrc.unit, "t")
+    _check_table_time(t, raw[tsrc.column], source)
+    series: list[Series] = []
+    for name, k, ref, spec in iter_sources(m):
+        if ref.column is None:
+            raise DataError(
+                f"{source}: channel {name!r}: the mapping gives a CAN {ref.describe()}; "
+                "this log needs a 'column'"
+            )
+        if ref.column not in raw:
+            if not m.is_mapped(name):
+                continue  # reported as missing after the assembly
+            raise DataError(
+                f"{source}: channel {name!r}: mapped column {ref.column!r} not found "
+                f"(columns: {', '.join(raw)})"
+            )
+        col = raw[ref.column]
+        label = source_label(name, ref)
+        text_kept = spec.values is not None
+        if text_kept:
+            values = col.values
+        else:
+            as_nan = frozenset(str(x).strip() for x in spec.invalid if isinstance(x, str))
+            values = parse_numbers(col, label, source, m.csv.decimal, as_nan)
+        hold = spec.interpolation == "hold" or (
+            spec.interpolation == "auto" and (CHANNEL_BY_NAME[name].integer or text_kept)
+        )
+        series.append(
+            Series(name, source_key(name, k), label, t, values, hold, None, col.locate)
+        )
+    for name, col in raw.items():
+        if name.startswith(TRUTH_PREFIX):
+            values = parse_numbers(col, f"channel {name!r}", source, m.csv.decimal)
+            series.append(Series(name, name, f"channel {name!r}", t, values, False, None,
+                                 col.locate))
+    return LogRead(series, fmt, use_file_units=False, table=True, meta=meta)
 
 
 # ----------------------------------------------------------------------------- CSV
@@ -128,7 +238,7 @@ def _read_csv(path: Path, opts: CsvOptions) -> Raw:
     while k < len(lines) and lines[k].startswith("#"):
         body = lines[k][1:].strip()
         if body.startswith(META_KEY):
-            meta = _parse_meta(body[len(META_KEY) :], path)
+            meta = parse_meta(body[len(META_KEY) :], path)
         k += 1
     numbered = [(n + 1, ln) for n, ln in enumerate(lines) if n >= k and ln.strip()]
     if not numbered:
@@ -178,10 +288,10 @@ def _read_parquet(path: Path) -> Raw:
         table = pq.read_table(path)
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise DataError(
-            f"{path}: not a readable Parquet file, corrupt or truncated ({_one_line(exc)})"
+            f"{path}: not a readable Parquet file, corrupt or truncated ({one_line(exc)})"
         ) from exc
     meta_b = (table.schema.metadata or {}).get(META_KEY.encode())
-    meta = _parse_meta(meta_b, path) if meta_b is not None else {}
+    meta = parse_meta(meta_b, path) if meta_b is not None else {}
     raw: dict[str, Column] = {}
     for name in table.column_names:
         try:
@@ -225,11 +335,11 @@ def _read_mat(path: Path) -> Raw:
         ) from exc
     except Exception as exc:  # scipy raises many types for corrupt files
         raise DataError(
-            f"{path}: not a readable MATLAB file, corrupt or truncated ({_one_line(exc)})"
+            f"{path}: not a readable MATLAB file, corrupt or truncated ({one_line(exc)})"
         ) from exc
     variables = {k: v for k, v in mat.items() if not k.startswith("__")}
     meta_text = variables.pop(META_KEY, None)
-    meta = _parse_meta(meta_text, path) if isinstance(meta_text, str) else {}
+    meta = parse_meta(meta_text, path) if isinstance(meta_text, str) else {}
     structs = [k for k, v in variables.items() if isinstance(v, dict)]
     if len(structs) == 1 and len(variables) == 1:
         variables = dict(variables[structs[0]])
@@ -269,15 +379,59 @@ def write_trial_mdf(trial: Trial, path: str | Path) -> Path:
     return write_mdf(trial.channels, _ordered(trial.channels), comment, p)
 
 
-def _read_bus(path: Path, m: ChannelMapping) -> tuple[Raw, ChannelMapping]:
-    """A bus log resampled onto the grid, its metadata, and the mapping to apply."""
+def _read_can(path: Path, m: ChannelMapping) -> LogRead:
+    """A CAN trace (.blf/.asc/.log/GVRET .csv/bus-logging MDF4) decoded with the DBC."""
+    from parknss.data.canlog import CanRequest, read_can_series
+
+    requests = []
+    for name, k, ref, _spec in iter_sources(m):
+        if ref.message is None:
+            if not m.is_mapped(name):
+                raise DataError(
+                    f"{path}: channel {name!r}: not mapped (a CAN log needs "
+                    f"channels.{name}.message and .signal in the mapping, or "
+                    f"'{name}: absent')"
+                )
+            raise DataError(
+                f"{path}: channel {name!r}: the mapping gives {ref.describe()}; a CAN log "
+                "needs 'message' and 'signal'"
+            )
+        requests.append(
+            CanRequest(source_key(name, k), name, ref.message, str(ref.signal),
+                       source_label(name, ref))
+        )
+    if m.can.dbc is None:
+        raise DataError(f"{path}: a CAN log needs a DBC: set can.dbc in the mapping")
+    m = resolve_dbc(m, path)
+    series, prov = read_can_series(path, requests, m.can)
+    fmt = prov.pop("format", path.suffix.lower().lstrip("."))
+    return LogRead(series, fmt, use_file_units=m.can.use_file_units, provenance=prov)
+
+
+def _is_can(path: Path) -> bool:
+    """A CAN trace: by suffix, a GVRET CSV by its header, an MDF4 by its bus-logging group."""
+    suf = path.suffix.lower()
+    if suf in CAN_TRACE_SUFFIXES:
+        return True
+    from parknss.data import canframes
+
+    if suf == ".csv":
+        return canframes.is_gvret_csv(path)
+    if suf in MDF_SUFFIXES:
+        return canframes.is_bus_logging_mdf(path)
+    return False
+
+
+def _read_log(path: Path, m: ChannelMapping) -> LogRead:
+    """Any supported log as series, ready for the assembly."""
     _nonempty(path)
-    log: BusLog = read_mdf(path, m) if path.suffix.lower() in MDF_SUFFIXES else read_can(path, m)
-    meta: dict = {"provenance": json.dumps(log.provenance, sort_keys=True)}
-    text = log.header_text or ""
-    if text.startswith(META_KEY):
-        meta = _parse_meta(text[len(META_KEY) :], path)
-    return (log.raw, meta), log.applied
+    suf = path.suffix.lower()
+    if _is_can(path):
+        return _read_can(path, m)
+    if suf in MDF_SUFFIXES:
+        return read_mdf(path, m)
+    raw, meta = _READERS[suf](path, m.csv)
+    return table_read(raw, meta, m, path, suf.lstrip("."))
 
 
 # ------------------------------------------------------------------------ dispatch
@@ -288,7 +442,7 @@ _READERS: dict[str, Callable[..., Raw]] = {
     ".pq": lambda p, _o: _read_parquet(p),
     ".mat": lambda p, _o: _read_mat(p),
 }
-_BUS_SUFFIXES: tuple[str, ...] = (*MDF_SUFFIXES, *CAN_SUFFIXES)
+_BUS_SUFFIXES: tuple[str, ...] = (*MDF_SUFFIXES, *CAN_TRACE_SUFFIXES)
 _WRITERS: dict[str, Callable[[Trial, Path], Path]] = {
     ".csv": write_trial_csv,
     ".parquet": write_trial_parquet,
@@ -315,16 +469,31 @@ def write_trial(trial: Trial, path: str | Path) -> Path:
     return _WRITERS[suf](trial, p)
 
 
-def infer_identity(path: str | Path) -> tuple[str, int]:
-    """(class, repetition) from a file name like ``park_in_left_r1.csv``, else DataError."""
+def identity_from_name(path: str | Path) -> tuple[str, int] | None:
+    """(class, repetition) from a file name like ``park_in_left_r1.csv``, else None."""
     p = Path(path)
     match = _NAME_RE.match(p.stem)
     if match is None or int(match["rep"]) < 1:
+        return None
+    return match["cls"], int(match["rep"])
+
+
+def infer_identity(path: str | Path) -> tuple[str, int]:
+    """(class, repetition) from a file name like ``park_in_left_r1.csv``, else DataError."""
+    found = identity_from_name(path)
+    if found is None:
+        p = Path(path)
         raise DataError(
             f"{p}: cannot infer class and repetition from the file name (expected "
-            f"<class>_r<N>, e.g. park_in_left_r1{p.suffix}), and no manifest.csv gives them"
+            f"<class>_r<N>, e.g. park_in_left_r1{p.suffix})"
         )
-    return match["cls"], int(match["rep"])
+    return found
+
+
+def _safe_id(stem: str) -> str:
+    """A trial id from a file stem: letters, digits, '_', '.', '-' (others become '_')."""
+    out = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)
+    return out if out and out[0].isalnum() else f"t{out}"
 
 
 def _vehicle_id(m: ChannelMapping, meta: dict) -> str:
@@ -334,54 +503,96 @@ def _vehicle_id(m: ChannelMapping, meta: dict) -> str:
     return str(meta.get("vehicle_id", m.vehicle.id))
 
 
+def _missing(channels: dict, m: ChannelMapping, source: str) -> None:
+    """Every channel the mapping does not declare absent must be in the log."""
+    missing = [c for c in m.present() if c not in channels]
+    if missing:
+        more = f" ({len(missing)} channels missing: {', '.join(missing)})" * (len(missing) > 1)
+        raise DataError(
+            f"{source}: channel {missing[0]!r}: missing{more}; map it to the log's column, "
+            f"or declare it '{missing[0]}: absent' in the mapping"
+        )
+
+
+def read_trials(
+    path: str | Path,
+    mapping: ChannelMapping | str | Path | None = None,
+    maneuver: str | None = None,
+    repetition: int | None = None,
+    window: tuple[float, float] | None = None,
+) -> list[Trial]:
+    """Read and validate one log file: one trial, or several when its gaps split it.
+
+    Args:
+        path: a .csv, .parquet/.pq, .mat, .mf4/.mdf, .blf, .asc or candump .log file
+            (layouts in docs/data.md; a GVRET CSV and a bus-logging MDF4 are recognised
+            by their content and decoded with the mapping's DBC).
+        mapping: a ChannelMapping or mapping-YAML path (required for CAN logs).
+        maneuver, repetition: the trial's class and repetition; by default taken from
+            the file's parknss_trial metadata, else from a name like park_in_left_r1,
+            else class ``unlabelled``, repetition 1 and the file stem as id.
+        window: keep [start, end] s from the log's first time stamp (overrides the
+            mapping's time.crop).
+
+    Returns:
+        Validated Trials (float64 channels in schema units); with ``resample.on_gap:
+        split`` one per stretch between gaps, ids ``<id>_s1``, ``<id>_s2``, ...
+        Raises DataError/ConfigError.
+    """
+    p = Path(path)
+    m = as_mapping(mapping)
+    _suffix(p)
+    read = _read_log(p, m)
+    cfg = load_validation_config()
+    win = window if window is not None else m.time.crop
+    parts: list[Assembled] = assemble(read, m, str(p), win)
+    meta = read.meta
+    if maneuver is None and repetition is None and {"id", "maneuver", "repetition"} <= set(meta):
+        tid, cls, rep = meta["id"], meta["maneuver"], meta["repetition"]
+    else:
+        named = identity_from_name(p)
+        cls_i, rep_i = named if named is not None else (UNLABELLED, 1)
+        cls = maneuver if maneuver is not None else cls_i
+        rep = repetition if repetition is not None else rep_i
+        tid = f"{cls}_r{rep}" if named is not None or maneuver is not None else _safe_id(p.stem)
+    required = tuple(m.present())
+    trials = []
+    for k, part in enumerate(parts):
+        _missing(part.channels, m, str(p))
+        # a file parknss wrote carries its own history; any other log gets the assembly's
+        provenance = str(meta.get("provenance") or json.dumps(part.provenance, sort_keys=True))
+        trial = Trial(
+            id=tid if len(parts) == 1 else f"{tid}_s{k + 1}",
+            maneuver=cls,
+            repetition=rep,
+            channels=part.channels,
+            vehicle_id=_vehicle_id(m, meta),
+            sample_rate_hz=meta.get("sample_rate_hz", SAMPLE_RATE_HZ),
+            provenance=provenance,
+        )
+        try:
+            trials.append(validate_trial(trial, str(p), cfg, required=required))
+        except TrialDataError as exc:
+            raise DataError(f"{exc}{mapping_hint(m, exc.channel)}") from exc
+    return trials
+
+
 def read_trial(
     path: str | Path,
     mapping: ChannelMapping | str | Path | None = None,
     maneuver: str | None = None,
     repetition: int | None = None,
+    window: tuple[float, float] | None = None,
 ) -> Trial:
-    """Read and validate one trial file; the format follows the extension.
-
-    Args:
-        path: a .csv, .parquet/.pq, .mat, .mf4/.mdf, .blf or .asc file (layouts in
-            docs/data.md; bus logs are resampled onto the 100 Hz grid first).
-        mapping: a ChannelMapping or mapping-YAML path for non-schema names/units
-            (required for CAN logs: the DBC and each channel's message and signal).
-        maneuver, repetition: the trial's class and repetition; by default taken from
-            the file's parknss_trial metadata, else from a name like park_in_left_r1.
-
-    Returns:
-        A validated Trial (float64 channels in schema units). Raises DataError/ConfigError.
-    """
-    p = Path(path)
-    m = as_mapping(mapping)
-    suf = _suffix(p)
-    if suf in _BUS_SUFFIXES:
-        (raw, meta), applied = _read_bus(p, m)
-    else:
-        (raw, meta), applied = _READERS[suf](p, m.csv), m
-    channels = apply_mapping(raw, applied, str(p))
-    if maneuver is None and repetition is None and {"id", "maneuver", "repetition"} <= set(meta):
-        tid, cls, rep = meta["id"], meta["maneuver"], meta["repetition"]
-    else:
-        if maneuver is None or repetition is None:
-            cls_i, rep_i = infer_identity(p)
-        cls = maneuver if maneuver is not None else cls_i
-        rep = repetition if repetition is not None else rep_i
-        tid = f"{cls}_r{rep}"
-    trial = Trial(
-        id=tid,
-        maneuver=cls,
-        repetition=rep,
-        channels=channels,
-        vehicle_id=_vehicle_id(m, meta),
-        sample_rate_hz=meta.get("sample_rate_hz", SAMPLE_RATE_HZ),
-        provenance=str(meta.get("provenance") or json.dumps({"source_file": str(p)})),
-    )
-    try:
-        return validate_trial(trial, str(p))
-    except TrialDataError as exc:
-        raise DataError(f"{exc}{mapping_hint(applied, exc.channel)}") from exc
+    """Read and validate one trial file (see :func:`read_trials`); a log that splits
+    into several trials at its gaps is an error here (use read_trials or import)."""
+    trials = read_trials(path, mapping, maneuver, repetition, window)
+    if len(trials) > 1:
+        raise DataError(
+            f"{path}: the log splits into {len(trials)} trials at its gaps "
+            "(resample.on_gap: split); read it with read_trials or campaign import"
+        )
+    return trials[0]
 
 
 # ------------------------------------------------------------------------ campaign
@@ -425,12 +636,23 @@ def write_campaign(campaign: Campaign, out_dir: str | Path) -> Path:
             why = "duplicate" if tr.id in seen else "unsafe as a file name"
             raise DataError(f"{out}: trial id {tr.id!r} is {why}")
         seen.add(tr.id)
-    trials = [validate_trial(tr, f"{out / (tr.id + '.parquet')}") for tr in campaign]
+    present = campaign_channels(campaign) if len(campaign) else REQUIRED_CHANNELS
+    if "t" not in present:
+        raise DataError(f"{out}: the trials have no time channel 't'")
+    trials = [
+        validate_trial(tr, f"{out / (tr.id + '.parquet')}", required=present) for tr in campaign
+    ]
+    meta = dict(campaign.meta)
+    absent = [c for c in REQUIRED_CHANNELS if c not in present]
+    if absent:
+        meta["absent_channels"] = absent
+    else:
+        meta.pop("absent_channels", None)
     try:
-        meta_json = json.loads(json.dumps(campaign.meta))
+        meta_json = json.loads(json.dumps(meta))
     except (TypeError, ValueError) as exc:
         raise DataError(
-            f"{out}: campaign meta is not JSON-serializable ({_one_line(exc)})"
+            f"{out}: campaign meta is not JSON-serializable ({one_line(exc)})"
         ) from exc
     out.mkdir(parents=True, exist_ok=True)
     entries = []
@@ -460,7 +682,7 @@ def _read_index(folder: Path) -> CampaignIndex:
     try:
         doc = json.loads(jpath.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{jpath}: not valid JSON ({_one_line(exc)})") from exc
+        raise DataError(f"{jpath}: not valid JSON ({one_line(exc)})") from exc
     try:
         index = CampaignIndex.model_validate(doc)
     except ValidationError as exc:
@@ -486,6 +708,11 @@ def read_campaign(path: str | Path) -> Campaign:
     if not folder.is_dir():
         raise DataError(f"{folder}: not a campaign folder (give the folder with {CAMPAIGN_JSON})")
     index = _read_index(folder)
+    absent = index.meta.get("absent_channels", [])
+    if not isinstance(absent, list) or not set(absent) <= set(REQUIRED_CHANNELS) - {"t"}:
+        raise DataError(f"{folder / CAMPAIGN_JSON}: meta.absent_channels {absent!r} is not a "
+                        "list of schema channels")
+    required = tuple(c for c in REQUIRED_CHANNELS if c not in absent)
     trials: list[Trial] = []
     seen: set[str] = set()
     for e in index.trials:
@@ -498,7 +725,11 @@ def read_campaign(path: str | Path) -> Campaign:
             raise DataError(f"{folder / CAMPAIGN_JSON}: duplicate trial id {e.id!r}")
         seen.add(e.id)
         raw, _ = _read_parquet(f)
-        channels = apply_mapping(raw, ChannelMapping(), str(f))
+        channels = {
+            name: parse_numbers(col, f"channel {name!r}", str(f)) for name, col in raw.items()
+        }
+        if "t" not in channels:
+            raise DataError(f"{f}: channel 't': missing")
         n = len(channels["t"])
         if n != e.n_samples:
             raise DataError(
@@ -508,15 +739,52 @@ def read_campaign(path: str | Path) -> Campaign:
         tr = Trial(
             e.id, e.maneuver, e.repetition, channels, e.vehicle_id, e.sample_rate_hz, e.provenance
         )
-        trials.append(validate_trial(tr, str(f)))
+        trials.append(validate_trial(tr, str(f), required=required))
     return Campaign(trials, name=index.name, meta=dict(index.meta))
 
 
 # -------------------------------------------------------------------------- import
 
 
-def _read_manifest(src: Path, logs: list[Path]) -> list[tuple[Path, str, int]]:
-    """manifest.csv rows (file, class, repetition); every log listed exactly once."""
+@dataclass(frozen=True)
+class _Job:
+    """One log to import: its file, class and repetition (None: unlabelled), window."""
+
+    path: Path
+    cls: str | None
+    rep: int | None
+    window: tuple[float, float] | None = None
+
+
+def _float_or_none(text: str, what: str, where: str) -> float | None:
+    if not text.strip():
+        return None
+    try:
+        x = float(text)
+    except ValueError:
+        raise DataError(f"{where}: {what} {text.strip()!r} is not a number (s)") from None
+    if not math.isfinite(x) or x < 0:
+        raise DataError(f"{where}: {what} {text.strip()!r} must be a time >= 0 s")
+    return x
+
+
+def _manifest_window(r: list[str], idx: dict[str, int], where: str):
+    """The row's (start_s, end_s) crop window, s from the log's first time stamp, or None."""
+    if "start_s" not in idx and "end_s" not in idx:
+        return None
+    a = _float_or_none(r[idx["start_s"]], "start_s", where) if "start_s" in idx else None
+    b = _float_or_none(r[idx["end_s"]], "end_s", where) if "end_s" in idx else None
+    if a is None and b is None:
+        return None
+    a, b = a or 0.0, b if b is not None else math.inf
+    if not a < b:
+        raise DataError(f"{where}: start_s {a:g} is not before end_s {b:g}")
+    return a, b
+
+
+def _read_manifest(src: Path, logs: list[Path]) -> list[_Job]:
+    """manifest.csv rows: ``file`` and optional ``class``, ``repetition``, ``start_s``,
+    ``end_s`` (a crop window); every log listed exactly once."""
     mpath = src / MANIFEST
     _nonempty(mpath)
     try:
@@ -525,32 +793,39 @@ def _read_manifest(src: Path, logs: list[Path]) -> list[tuple[Path, str, int]]:
         raise DataError(f"{mpath}: not UTF-8 text") from exc
     rows = [(n + 1, r) for n, r in enumerate(rows) if any(x.strip() for x in r)]
     header = [h.strip() for h in rows[0][1]] if rows else []
-    need = ("file", "class", "repetition")
-    missing = [c for c in need if c not in header]
-    if missing:
+    if "file" not in header:
         raise DataError(
-            f"{mpath}: line 1: column {missing[0]!r} missing (need file, class, repetition)"
+            f"{mpath}: line 1: column 'file' missing (columns: file, and optionally class, "
+            "repetition, start_s, end_s)"
         )
-    idx = {c: header.index(c) for c in need}
-    out: list[tuple[Path, str, int]] = []
+    if ("class" in header) != ("repetition" in header):
+        have, lack = ("class", "repetition") if "class" in header else ("repetition", "class")
+        raise DataError(f"{mpath}: line 1: column {lack!r} missing (given with {have!r})")
+    known = ("file", "class", "repetition", "start_s", "end_s")
+    idx = {c: header.index(c) for c in known if c in header}
+    out: list[_Job] = []
     listed: set[str] = set()
     for n, r in rows[1:]:
+        where = f"{mpath}: line {n}"
         if len(r) != len(header):
-            raise DataError(f"{mpath}: line {n}: {len(r)} fields, the header has {len(header)}")
-        name, cls, rep_s = (r[idx[c]].strip() for c in need)
+            raise DataError(f"{where}: {len(r)} fields, the header has {len(header)}")
+        name = r[idx["file"]].strip()
+        cls = r[idx["class"]].strip() if "class" in idx else ""
+        rep_s = r[idx["repetition"]].strip() if "repetition" in idx else ""
         f = src / name
         if name in listed:
-            raise DataError(f"{mpath}: line {n}: file {name!r} listed twice")
+            raise DataError(f"{where}: file {name!r} listed twice")
         if not f.is_file() or f.suffix.lower() not in LOG_SUFFIXES:
-            raise DataError(
-                f"{mpath}: line {n}: file {name!r} not found as a log ({LOG_KINDS}) in {src}"
-            )
-        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", cls):
-            raise DataError(f"{mpath}: line {n}: class {cls!r} is not a name (letters, digits, _)")
-        if not rep_s.isdigit() or int(rep_s) < 1:
-            raise DataError(f"{mpath}: line {n}: repetition {rep_s!r} is not an integer >= 1")
+            raise DataError(f"{where}: file {name!r} not found as a log ({LOG_KINDS}) in {src}")
+        if cls and not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", cls):
+            raise DataError(f"{where}: class {cls!r} is not a name (letters, digits, _)")
+        if bool(cls) != bool(rep_s):
+            raise DataError(f"{where}: give both class and repetition, or leave both empty")
+        if rep_s and (not rep_s.isdigit() or int(rep_s) < 1):
+            raise DataError(f"{where}: repetition {rep_s!r} is not an integer >= 1")
         listed.add(name)
-        out.append((f, cls, int(rep_s)))
+        window = _manifest_window(r, idx, where)
+        out.append(_Job(f, cls or None, int(rep_s) if rep_s else None, window))
     if not out:
         raise DataError(f"{mpath}: no trials listed")
     for f in logs:
@@ -587,29 +862,46 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
     if (folder / MANIFEST).exists():
         jobs = _read_manifest(folder, logs)
     else:
-        jobs = [(f, *infer_identity(f)) for f in logs]
+        jobs = [_Job(f, *(identity_from_name(f) or (None, None))) for f in logs]
     if not jobs:
         raise DataError(f"{folder}: no logs found ({LOG_KINDS})")
     trials: list[Trial] = []
     origin: dict[str, Path] = {}
-    for f, cls, rep in jobs:
-        tr = read_trial(f, m, cls, rep)
-        if tr.id in origin:
-            raise DataError(f"{f}: trial {tr.id!r} again (already from {origin[tr.id].name})")
-        origin[tr.id] = f
-        tr.provenance = json.dumps(
-            {
-                "imported_from": str(f),
-                "sha256": _sha256(f),
-                "mapping": None
-                if mapping is None or isinstance(mapping, ChannelMapping)
-                else str(mapping),
-                "file_provenance": tr.provenance,
-            },
-            sort_keys=True,
-        )
-        trials.append(tr)
+    unlabelled = 0
+    for job in jobs:
+        f = job.path
+        if job.cls is None:
+            unlabelled += 1
+        cls = job.cls if job.cls is not None else UNLABELLED
+        rep = job.rep if job.rep is not None else unlabelled
+        parts = read_trials(f, m, cls, rep, job.window)
+        for tr in parts:
+            if job.cls is None:  # ids of unlabelled trials: the file stem (and stretch)
+                suffix = tr.id[len(f"{cls}_r{rep}"):]
+                tr.id = _safe_id(f.stem) + suffix
+            if tr.id in origin:
+                raise DataError(
+                    f"{f}: trial {tr.id!r} again (already from {origin[tr.id].name})"
+                )
+            origin[tr.id] = f
+            tr.provenance = json.dumps(
+                {
+                    "imported_from": str(f),
+                    "sha256": _sha256(f),
+                    "mapping": None
+                    if mapping is None or isinstance(mapping, ChannelMapping)
+                    else str(mapping),
+                    "window_s": list(job.window) if job.window is not None else None,
+                    "file_provenance": tr.provenance,
+                },
+                sort_keys=True,
+            )
+            trials.append(tr)
     meta: dict = {"synthetic": False, "imported_from": str(folder), "vehicle_id": m.vehicle.id}
+    if m.absent():
+        meta["absent_channels"] = m.absent()
+    if unlabelled:
+        meta["unlabelled_trials"] = unlabelled
     if m.vehicle.geometry is not None:
         meta["vehicle_geometry"] = VehicleGeometry.from_dict(m.vehicle.geometry).to_dict()
     return Campaign(trials, name=folder.name, meta=meta)
@@ -621,6 +913,7 @@ __all__ = [
     "infer_identity",
     "read_campaign",
     "read_trial",
+    "read_trials",
     "write_campaign",
     "write_trial",
     "write_trial_csv",

@@ -1,21 +1,34 @@
-"""Channel mapping: how a user's log names, units and gear codes map onto the schema.
+"""Channel mapping: how a user's log maps onto the schema, in one documented vocabulary.
 
-A mapping YAML (configs/mapping_example.yaml documents every key) says, per schema
-channel, which source column holds it and in which unit; values are converted only
-through :func:`parknss.signals.convert_to_schema`. For bus logs the same file names the
-MDF channel (``column``, found by ``mdf.match``) or the CAN ``message``/``signal`` (with
-the DBC in ``can.dbc``), and ``resample`` sets the tolerance of the 100 Hz resampling
-(configs/mapping_mdf_example.yaml, configs/mapping_can_example.yaml). Columns named like
-the schema and not mentioned are taken as they are (schema units). Gear codes
-(``R``/``N``/``P``/``D`` or numbers) map to -1/0/+1 through ``gear_values``. Nothing is
-guessed: an unknown unit, a unit of the wrong kind, a missing column or an unmapped gear
-code is a one-line error.
+A mapping YAML (configs/mapping_example.yaml documents every key; configs/mappings/ holds
+mappings for real logs) says, per schema channel, where it comes from and how its values
+become schema values. The steps, in this order (docs/data.md, "Channel mapping"):
+
+1. **sources**: one ``column`` (CSV/Parquet/.mat column or MDF channel), or a CAN
+   ``message``/``signal`` of the DBC, or several ``sources`` combined by ``combine``
+   (``mean`` of four wheel speeds, ``sum`` of a coarse and a fine angle); or the channel
+   is ``absent`` from these logs, or a known ``constant``.
+2. **values**: an enumeration map (text labels or numeric codes -> numbers), e.g. gear
+   ``{P: 0, R: -1, N: 0, D: 1}``; an unlisted code is an error.
+3. **invalid samples** (on each source's own values, before any scaling): the values in
+   ``invalid`` (start-up sentinels such as 3276.7, ``.nan``, ``""``) and those outside
+   ``valid_range``; ``on_invalid: mask`` drops them (the resampler bridges short holes,
+   a hole longer than the gap limit is a gap), ``crop`` cuts the trial to the longest
+   stretch without them.
+4. **time**: every format goes onto the 100 Hz grid (:mod:`parknss.data.assemble`).
+5. **combine** the sources, then ``scale``/``offset`` (raw counts -> ``unit``), the unit
+   conversion of :func:`parknss.signals.convert_to_schema`, ``invert``,
+   ``sign_from_gear`` (unsigned speed: magnitude with the sign of the gear) and ``clip``
+   (a documented clamp in schema units; clamped samples are counted in the provenance).
+
+Nothing is guessed: an unknown unit, a unit of the wrong kind, a missing column or an
+unmapped code is a one-line error that says what to change in the mapping.
 """
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -25,50 +38,40 @@ import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
 from parknss.config import StrictModel
-from parknss.errors import ConfigError, DataError
+from parknss.errors import ConfigError
 from parknss.signals import (
     CHANNEL_BY_NAME,
     DT,
-    TRUTH_PREFIX,
     UNIT_CONVERSIONS,
-    convert_to_schema,
+    canonical_unit,
+    unit_dimension,
 )
 from parknss.vehicle import VehicleGeometry
 
 Interpolation = Literal["auto", "linear", "hold"]
+ABSENT = "absent"  # YAML shorthand: ``torque_cmd: absent``
 
 
-class ChannelSource(StrictModel):
-    """Where one schema channel comes from: a source column, its unit, its sign.
+class SourceRef(StrictModel):
+    """One source of a channel: a column / MDF channel, or a CAN message and signal.
 
-    ``column`` names the column (CSV, Parquet, .mat) or the MDF channel (an exact name or
-    a pattern, see :class:`MdfOptions`); a CAN log names ``message`` and ``signal`` of
-    the DBC instead. ``group`` picks the MDF data group when a name occurs in several.
-    ``interpolation`` says how a bus-log channel goes onto the 100 Hz grid: ``linear``,
-    ``hold`` (previous value), or ``auto`` (hold for gear, integer, enumerated/text and
-    all CAN signals; linear for other MDF channels).
+    ``group`` picks the MDF data group when a name occurs in several.
     """
 
     column: str | None = Field(None, min_length=1)
-    unit: str | None = None  # None: already in the schema unit (or the MDF/DBC unit)
-    invert: bool = False  # multiply by -1 after conversion (opposite sign convention)
-    message: str | None = Field(None, min_length=1)  # CAN: message name in the DBC
-    signal: str | None = Field(None, min_length=1)  # CAN: signal name in that message
-    group: int | None = Field(None, ge=0)  # MDF: data group index of the channel
-    interpolation: Interpolation = "auto"
+    message: str | None = Field(None, min_length=1)
+    signal: str | None = Field(None, min_length=1)
+    group: int | None = Field(None, ge=0)
 
     @model_validator(mode="after")
-    def _one_source(self) -> ChannelSource:
+    def _one_kind(self) -> SourceRef:
         can = self.message is not None or self.signal is not None
         if can and (self.message is None or self.signal is None):
             raise ValueError("a CAN source needs both 'message' and 'signal'")
         if can == (self.column is not None):
             raise ValueError(
                 "give 'column' (CSV, Parquet, .mat or MDF channel) or 'message' and "
-                "'signal' (CAN), not both"
-                if can
-                else "give 'column' (CSV, Parquet, .mat or MDF channel) or 'message' and "
-                "'signal' (CAN)"
+                "'signal' (CAN)" + (", not both" if can else "")
             )
         return self
 
@@ -79,12 +82,145 @@ class ChannelSource(StrictModel):
         return f"message {self.message!r}, signal {self.signal!r}"
 
 
+class ChannelSource(StrictModel):
+    """Where one schema channel comes from and how its values become schema values.
+
+    Exactly one of: a single source (``column``, or ``message`` + ``signal``), several
+    ``sources`` with ``combine``, ``absent: true``, or ``constant``. See the module text
+    for the order of the steps.
+
+    Attributes:
+        unit: the unit of the values after ``scale``/``offset`` (any spelling of
+            :func:`parknss.signals.canonical_unit`); None: the file's unit for bus logs
+            (``use_file_units``), else the schema unit.
+        scale, offset: raw -> unit, ``value * scale + offset`` (raw counts).
+        invert: multiply by -1 after the conversion (opposite sign convention).
+        sign_from_gear: the speed is unsigned: take its magnitude with the sign of the
+            gear (reverse negative; drive, neutral and park positive).
+        clip: clamp to [lo, hi] in schema units (documented; counted in the provenance).
+        values: enumeration map, source label or code -> number (gear: -1/0/+1).
+        invalid: source values that mark a sample invalid (sentinels; ``.nan``; ``""``).
+        valid_range: source values outside [lo, hi] are invalid.
+        on_invalid: ``mask`` (drop the samples) or ``crop`` (cut the trial to the longest
+            stretch without them).
+        interpolation: ``linear``, ``hold`` (previous value) or ``auto`` (hold for gear,
+            integer, enumerated/text and CAN signals; linear otherwise).
+        max_gap_s: longest hole between two samples of this channel that is bridged, s
+            (None: ``resample.max_gap_s``).
+        event: the channel is logged on change only (its value holds until the next
+            sample, however long): no gap limit, and its last value holds to the end.
+            None: the reader's default (true for MDF enumerated and integer channels,
+            false otherwise).
+    """
+
+    column: str | None = Field(None, min_length=1)
+    message: str | None = Field(None, min_length=1)
+    signal: str | None = Field(None, min_length=1)
+    group: int | None = Field(None, ge=0)
+    sources: list[SourceRef] | None = Field(None, min_length=1)
+    combine: Literal["mean", "sum"] | None = None
+    absent: bool = False
+    constant: float | None = None
+    unit: str | None = None
+    scale: float = 1.0
+    offset: float = 0.0
+    invert: bool = False
+    sign_from_gear: bool = False
+    clip: tuple[float, float] | None = None
+    values: dict[str, float] | None = None
+    invalid: list[float | str] = Field(default_factory=list)
+    valid_range: tuple[float, float] | None = None
+    on_invalid: Literal["mask", "crop"] = "mask"
+    interpolation: Interpolation = "auto"
+    max_gap_s: float | None = Field(None, gt=0.0)
+    event: bool | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _shorthand(cls, v):
+        if isinstance(v, str) and v.strip().lower() == ABSENT:
+            return {"absent": True}
+        return v
+
+    @field_validator("values", mode="before")
+    @classmethod
+    def _keys_as_text(cls, v):
+        return {str(k): code for k, code in v.items()} if isinstance(v, dict) else v
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> ChannelSource:
+        single = any(x is not None for x in (self.column, self.message, self.signal))
+        kinds = [
+            k
+            for k, on in (
+                ("a single source", single),
+                ("'sources'", self.sources is not None),
+                ("'absent'", self.absent),
+                ("'constant'", self.constant is not None),
+            )
+            if on
+        ]
+        if len(kinds) != 1:
+            raise ValueError(
+                "give one of: 'column', 'message' and 'signal', 'sources', 'absent: true' or "
+                "'constant'" + (f" (got {' and '.join(kinds)})" if kinds else "")
+            )
+        if single:
+            SourceRef(column=self.column, message=self.message, signal=self.signal)
+        if self.sources is not None and len(self.sources) > 1 and self.combine is None:
+            raise ValueError("several 'sources' need 'combine: mean' or 'combine: sum'")
+        if self.constant is not None and not math.isfinite(self.constant):
+            raise ValueError("'constant' must be a finite number")
+        for name, pair in (("clip", self.clip), ("valid_range", self.valid_range)):
+            if pair is not None and not pair[0] <= pair[1]:
+                raise ValueError(f"'{name}' needs [lo, hi] with lo <= hi, got {list(pair)}")
+        if self.scale == 0.0 or not math.isfinite(self.scale):
+            raise ValueError("'scale' must be a finite, non-zero number")
+        return self
+
+    @property
+    def refs(self) -> list[SourceRef]:
+        """The sources (empty for absent and constant channels)."""
+        if self.sources is not None:
+            return list(self.sources)
+        if self.column is None and self.message is None:
+            return []
+        return [SourceRef(column=self.column, message=self.message, signal=self.signal,
+                          group=self.group)]
+
+    def describe(self) -> str:
+        """The source in words, for messages (the first source of several)."""
+        if self.absent:
+            return "absent"
+        if self.constant is not None:
+            return f"constant {self.constant:g}"
+        refs = self.refs
+        more = f" (+{len(refs) - 1} more)" if len(refs) > 1 else ""
+        return refs[0].describe() + more
+
+
 class TimeSource(StrictModel):
-    """The time column: name, unit (s or ms), and whether to start the trial at t = 0."""
+    """The time base of table logs, and the time window kept of every log.
+
+    Attributes:
+        column: the time column of CSV/Parquet/.mat logs (bus logs carry their own).
+        unit: its unit: s, ms, us or ns (any spelling of canonical_unit).
+        start_at_zero: subtract the first kept time stamp (logs with absolute time).
+        crop: keep only [start, end] s, counted from the log's first time stamp (the
+            manifest's ``start_s``/``end_s`` columns override it per file).
+    """
 
     column: str = Field("t", min_length=1)
     unit: str = "s"
     start_at_zero: bool = False
+    crop: tuple[float, float] | None = None
+
+    @field_validator("crop")
+    @classmethod
+    def _window(cls, v):
+        if v is not None and not (0.0 <= v[0] < v[1]):
+            raise ValueError(f"crop needs [start, end] with 0 <= start < end, got {list(v)}")
+        return v
 
 
 class CsvOptions(StrictModel):
@@ -136,26 +272,46 @@ class CanOptions(StrictModel):
         bus_channel: only frames of this bus channel (python-can's 0-based number);
             None takes every channel.
         use_file_units: without a ``unit`` in the mapping, take the DBC signal's unit.
+        strict_dbc: load the DBC in cantools' strict mode (overlapping signals, missing
+            sections are errors); by default it is loaded leniently and what was ignored
+            is reported as a warning.
+        duplicate_buses: a message seen on several bus channels (frames forwarded by a
+            gateway): ``first`` keeps one bus per message (the one with most frames of it,
+            ties to the lowest number) and records the choice; ``keep`` keeps all frames.
     """
 
     dbc: str | None = Field(None, min_length=1)
     bus_channel: int | None = Field(None, ge=0)
     use_file_units: bool = True
+    strict_dbc: bool = False
+    duplicate_buses: Literal["first", "keep"] = "first"
 
 
 class ResampleOptions(StrictModel):
-    """Resampling of bus logs onto the 100 Hz grid.
+    """How every log goes onto the 100 Hz grid (docs/data.md, "Time").
 
     Attributes:
         time_tolerance_s: a time stamp within this of a grid time counts as on it, s
             (loggers store times with finite resolution; BLF in ns).
+        max_gap_s: the longest hole between two samples of a channel that is bridged
+            (interpolated or held), s; a channel's own ``max_gap_s`` overrides it.
+        on_gap: a longer hole inside the log: ``refuse`` (one-line error naming the
+            channel and the time), or ``split`` (each stretch between gaps becomes a
+            trial of its own, ids ``<id>_s1``, ``<id>_s2``, ...).
+        min_segment_s: with ``split``, stretches shorter than this are dropped (s).
     """
 
     time_tolerance_s: float = Field(1.0e-6, gt=0.0, lt=DT / 2)
+    max_gap_s: float = Field(0.5, gt=0.0)
+    on_gap: Literal["refuse", "split"] = "refuse"
+    min_segment_s: float = Field(5.0, ge=0.0)
 
 
 class ChannelMapping(StrictModel):
-    """A whole mapping file (see configs/mapping_example.yaml)."""
+    """A whole mapping file (see configs/mapping_example.yaml).
+
+    ``gear_values`` is the older spelling of ``channels.gear.values`` (give one of them).
+    """
 
     time: TimeSource = TimeSource()
     channels: dict[str, ChannelSource] = Field(default_factory=dict)
@@ -171,6 +327,31 @@ class ChannelMapping(StrictModel):
     def _keys_as_text(cls, v):
         return {str(k): code for k, code in v.items()} if isinstance(v, dict) else v
 
+    def source(self, name: str) -> ChannelSource:
+        """The channel's source: as mapped, else a column/MDF channel of its own name.
+
+        The gear's enumeration map is folded in from ``gear_values``.
+        """
+        src = self.channels.get(name)
+        if src is None:
+            src = ChannelSource(column=name)
+        if name == "gear" and self.gear_values is not None and src.values is None:
+            src = src.model_copy(update={"values": {k: float(v) for k, v in
+                                                   self.gear_values.items()}})
+        return src
+
+    def absent(self) -> list[str]:
+        """Schema channels the mapping declares absent, in schema order."""
+        return [c for c in CHANNEL_BY_NAME if c != "t" and self.source(c).absent]
+
+    def present(self) -> list[str]:
+        """Schema channels a log read with this mapping must have (t first)."""
+        return [c for c in CHANNEL_BY_NAME if c == "t" or not self.source(c).absent]
+
+    def is_mapped(self, name: str) -> bool:
+        """Whether the mapping names the channel (rather than defaulting to its own name)."""
+        return name in self.channels or (name == "gear" and self.gear_values is not None)
+
 
 @dataclass(frozen=True)
 class Column:
@@ -180,38 +361,70 @@ class Column:
     locate: Callable[[int], str]
 
 
+def _check_unit(where: str, name: str, unit: str | None) -> None:
+    if unit is None:
+        return
+    if canonical_unit(unit) is None:
+        raise ConfigError(
+            f"{where}: channel {name!r}: unknown unit {unit!r} "
+            f"(known: {', '.join(UNIT_CONVERSIONS)}, in any case, and common aliases)"
+        )
+    target = CHANNEL_BY_NAME[name].unit
+    if unit_dimension(unit) != target:
+        raise ConfigError(
+            f"{where}: channel {name!r}: unit {unit!r} cannot be converted to the "
+            f"channel's unit {target!r}"
+        )
+
+
 def _check_mapping(m: ChannelMapping, where: str) -> None:
-    """Units known and convertible to each channel; gear codes in {-1, 0, 1}."""
+    """Names, units and codes that can work: every problem one line naming the key."""
     for name, src in m.channels.items():
         if name == "t":
             raise ConfigError(f"{where}: channel 't': map time under 'time:', not 'channels:'")
         if name not in CHANNEL_BY_NAME:
             raise ConfigError(f"{where}: channel {name!r}: not a schema channel")
-        if CHANNEL_BY_NAME[name].integer and src.interpolation == "linear":
+        integer = CHANNEL_BY_NAME[name].integer
+        if integer and src.interpolation == "linear":
             raise ConfigError(
                 f"{where}: channel {name!r}: an integer channel is never interpolated "
                 "(interpolation: hold or auto)"
             )
-        if src.unit is None:
-            continue
-        if src.unit not in UNIT_CONVERSIONS:
+        if integer and (src.unit not in (None, "-") or src.scale != 1.0 or src.offset != 0.0):
             raise ConfigError(
-                f"{where}: channel {name!r}: unknown unit {src.unit!r} "
-                f"(known: {', '.join(UNIT_CONVERSIONS)})"
+                f"{where}: channel {name!r}: gear takes no unit, scale or offset; map its "
+                "codes with 'values'"
             )
-        target = CHANNEL_BY_NAME[name].unit
-        if UNIT_CONVERSIONS[src.unit][0] != target:
+        _check_unit(where, name, src.unit)
+        if src.sign_from_gear and name in ("gear", "t"):
+            raise ConfigError(f"{where}: channel {name!r}: sign_from_gear is for speeds")
+        if src.sign_from_gear and m.source("gear").absent:
             raise ConfigError(
-                f"{where}: channel {name!r}: unit {src.unit!r} cannot be converted to the "
-                f"channel's unit {target!r}"
+                f"{where}: channel {name!r}: sign_from_gear needs the gear channel, which "
+                "the mapping declares absent (give gear a constant, e.g. 1 for a drive "
+                "without reversing, or map it)"
             )
-    if UNIT_CONVERSIONS.get(m.time.unit, ("",))[0] != "s":
-        raise ConfigError(f"{where}: time: unit {m.time.unit!r} is not a time unit (s or ms)")
+        if name == "gear" and src.values is not None and m.gear_values is not None:
+            raise ConfigError(
+                f"{where}: channel 'gear': give its codes in channels.gear.values or in "
+                "gear_values, not both"
+            )
+    gear = m.source("gear")
+    for code, value in (gear.values or {}).items():
+        if value not in (-1, 0, 1):
+            raise ConfigError(
+                f"{where}: gear_values: {code!r} -> {value:g}, expected -1, 0 or 1"
+            )
+    if gear.constant is not None and gear.constant not in (-1, 0, 1):
+        raise ConfigError(f"{where}: channel 'gear': constant {gear.constant:g} is not -1, 0 or 1")
+    if unit_dimension(m.time.unit) != "s":
+        raise ConfigError(
+            f"{where}: time: unit {m.time.unit!r} is not a time unit (s, ms, us or ns)"
+        )
     if m.csv.delimiter == m.csv.decimal:
         raise ConfigError(f"{where}: csv: delimiter and decimal mark are both {m.csv.decimal!r}")
-    for code, value in (m.gear_values or {}).items():
-        if value not in (-1, 0, 1):
-            raise ConfigError(f"{where}: gear_values: {code!r} -> {value}, expected -1, 0 or 1")
+    if all(m.source(c).absent for c in CHANNEL_BY_NAME if c != "t"):
+        raise ConfigError(f"{where}: every channel is declared absent; nothing to read")
 
 
 def load_mapping(path: str | Path) -> ChannelMapping:
@@ -233,9 +446,28 @@ def load_mapping(path: str | Path) -> ChannelMapping:
         raise ConfigError(f"{p}: field {loc!r}: {err['msg']}") from exc
     _check_mapping(m, str(p))
     if m.can.dbc is not None and not Path(m.can.dbc).is_absolute():
-        can = m.can.model_copy(update={"dbc": str(p.parent / m.can.dbc)})
-        m = m.model_copy(update={"can": can})
+        beside = p.parent / m.can.dbc
+        if beside.is_file():  # else it is looked for beside each log (resolve_dbc)
+            can = m.can.model_copy(update={"dbc": str(beside)})
+            m = m.model_copy(update={"can": can})
     return m
+
+
+def resolve_dbc(m: ChannelMapping, log: Path) -> ChannelMapping:
+    """The mapping with ``can.dbc`` found: as given (absolute, beside the mapping file or
+    the working directory), else beside the log; ConfigError naming the places tried."""
+    if m.can.dbc is None:
+        return m
+    dbc = Path(m.can.dbc)
+    if dbc.is_file():
+        return m
+    beside = log.parent / dbc
+    if not dbc.is_absolute() and beside.is_file():
+        return m.model_copy(update={"can": m.can.model_copy(update={"dbc": str(beside)})})
+    where = f"{dbc}" + ("" if dbc.is_absolute() else f" nor {beside}")
+    raise ConfigError(
+        f"{log}: DBC file {m.can.dbc} not found (can.dbc in the mapping; looked for {where})"
+    )
 
 
 def as_mapping(mapping: ChannelMapping | str | Path | None) -> ChannelMapping:
@@ -248,125 +480,38 @@ def as_mapping(mapping: ChannelMapping | str | Path | None) -> ChannelMapping:
     return load_mapping(mapping)
 
 
-def parse_numbers(col: Column, label: str, source: str, decimal: str = ".") -> np.ndarray:
-    """Raw values (numbers or text) -> float64; text that is not a number is an error.
-
-    ``nan``/``inf`` text parses (validation then reports it); an empty field or other
-    text raises DataError naming ``label`` and the first offending value's location.
-    """
-    v = col.values
-    if v.dtype.kind in "biuf":
-        return v.astype(np.float64)
-    text = [str(x).strip() for x in v]
-    if decimal != ".":
-        text = [s.replace(decimal, ".") for s in text]
-    try:
-        return np.array([float(s) for s in text], dtype=np.float64)
-    except ValueError:
-        pass
-    bad = []
-    for i, s in enumerate(text):
-        try:
-            float(s)
-        except ValueError:
-            bad.append(i)
-    i = bad[0]
-    what = "empty value" if text[i] == "" else f"non-numeric value {str(v[i]).strip()!r}"
-    raise DataError(f"{source}: {label}: {what} at {col.locate(i)} ({len(bad)} non-numeric values)")
-
-
-def _gear(col: Column, m: ChannelMapping, label: str, source: str) -> np.ndarray:
-    """Gear codes -> -1/0/+1 via gear_values (text or numeric codes), else numeric as is."""
-    if m.gear_values is None:
-        return parse_numbers(col, label, source, m.csv.decimal)
-    by_text = dict(m.gear_values)
-    by_num: dict[float, int] = {}
-    for k, code in m.gear_values.items():
-        with contextlib.suppress(ValueError):
-            by_num[float(k)] = code
-    out = np.empty(len(col.values), dtype=np.float64)
-    for i, raw in enumerate(col.values):
-        s = str(raw).strip()
-        code = by_text.get(s)
-        if code is None:
-            try:
-                code = by_num.get(float(s))
-            except ValueError:
-                code = None
-        if code is None:
-            known = ", ".join(m.gear_values)
-            raise DataError(
-                f"{source}: {label}: value {s!r} at {col.locate(i)} is not in gear_values ({known})"
-            )
-        out[i] = code
-    return out
-
-
-def _label(name: str, column: str) -> str:
-    return f"channel {name!r}" + (f" (column {column!r})" if column != name else "")
-
-
-def apply_mapping(raw: dict[str, Column], m: ChannelMapping, source: str) -> dict[str, np.ndarray]:
-    """Raw columns -> schema channels (float64, schema units) plus ``truth_*`` columns.
-
-    Channels not in the mapping are read from a column of their own name, if any (a
-    missing required one is then reported by validation). Other columns are ignored.
-    """
-    out: dict[str, np.ndarray] = {}
-    tsrc = m.time
-    if tsrc.column not in raw:
-        raise DataError(
-            f"{source}: channel 't': time column {tsrc.column!r} not found "
-            f"(columns: {', '.join(raw)})"
-        )
-    t = parse_numbers(raw[tsrc.column], _label("t", tsrc.column), source, m.csv.decimal)
-    t = convert_to_schema(t, tsrc.unit, "t")
-    if tsrc.start_at_zero and len(t):
-        t = t - t[0]
-    out["t"] = t
+def iter_sources(m: ChannelMapping) -> Iterator[tuple[str, int, SourceRef, ChannelSource]]:
+    """(schema channel, source index, source, channel spec) of every source to read."""
     for name in CHANNEL_BY_NAME:
         if name == "t":
             continue
-        src = m.channels.get(name)
-        if src is None:
-            if name in raw:
-                col = raw[name]
-                out[name] = (
-                    _gear(col, m, _label(name, name), source)
-                    if name == "gear"
-                    else parse_numbers(col, _label(name, name), source, m.csv.decimal)
-                )
-            continue
-        if src.column is None:
-            raise DataError(
-                f"{source}: channel {name!r}: the mapping gives a CAN {src.describe()}; "
-                "this log needs a 'column'"
-            )
-        if src.column not in raw:
-            raise DataError(
-                f"{source}: channel {name!r}: mapped column {src.column!r} not found "
-                f"(columns: {', '.join(raw)})"
-            )
-        label = _label(name, src.column)
-        if name == "gear":
-            vals = _gear(raw[src.column], m, label, source)
-        else:
-            vals = parse_numbers(raw[src.column], label, source, m.csv.decimal)
-            if src.unit is not None:
-                vals = convert_to_schema(vals, src.unit, name)
-        out[name] = -vals if src.invert else vals
-    for col_name, col in raw.items():
-        if col_name.startswith(TRUTH_PREFIX):
-            out[col_name] = parse_numbers(col, _label(col_name, col_name), source, m.csv.decimal)
-    return out
+        src = m.source(name)
+        for k, ref in enumerate(src.refs):
+            yield name, k, ref, src
+
+
+def source_key(channel: str, k: int) -> str:
+    """The raw key of a channel's k-th source (unique within one log)."""
+    return f"{channel}#{k}"
+
+
+def source_label(channel: str, ref: SourceRef, kind: str = "column") -> str:
+    """How messages name a source: ``channel 'vx' (column 'VehSpd')``."""
+    if ref.message is not None:
+        return f"channel {channel!r} (message {ref.message!r}, signal {ref.signal!r})"
+    if ref.column == channel:
+        return f"channel {channel!r}"
+    return f"channel {channel!r} ({kind} {ref.column!r})"
 
 
 def mapping_hint(m: ChannelMapping, channel: str | None) -> str:
     """' (mapped from column X in unit U; check the mapping)' for a mapped channel, else ''."""
     if channel == "t" and (m.time.column != "t" or m.time.unit != "s"):
         return f" (mapped from column {m.time.column!r} in {m.time.unit!r}; check the mapping)"
-    src = m.channels.get(channel or "")
-    if src is None:
+    if channel not in CHANNEL_BY_NAME or not m.is_mapped(channel):
+        return ""
+    src = m.source(channel)
+    if src.absent or src.constant is not None:
         return ""
     unit = src.unit or CHANNEL_BY_NAME[channel].unit
     return f" (mapped from {src.describe()} in {unit!r}; check the mapping's unit)"

@@ -24,27 +24,26 @@ import re
 import sys
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from parknss.data.mapping import ChannelMapping, ChannelSource
-from parknss.data.resample import TIME_KEY, BusLog, Series, to_raw, unique_key
-from parknss.errors import DataError
-from parknss.signals import CHANNEL_BY_NAME, CHANNELS, TRUTH_PREFIX
+from parknss.data.assemble import LogRead
+from parknss.data.mapping import ChannelMapping, ChannelSource, SourceRef, iter_sources, source_key
+from parknss.data.meta import META_KEY, parse_meta
+from parknss.data.resample import Series
+from parknss.errors import DataError, one_line
+from parknss.signals import CHANNEL_BY_NAME, TRUTH_PREFIX
 
 MDF_SUFFIXES: tuple[str, ...] = (".mf4", ".mdf")
 MDF_VERSION = "4.10"  # written by write_mdf
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split())
-    return f"{exc.__class__.__name__}: {text}"[:300]
-
 
 @contextlib.contextmanager
-def _quiet() -> Iterator[None]:
+def quiet() -> Iterator[None]:
     """Silence asammdf's logger and the 'Exception ignored in __del__' of failed opens."""
     log = logging.getLogger("asammdf")
     level, hook = log.level, sys.unraisablehook
@@ -57,19 +56,20 @@ def _quiet() -> Iterator[None]:
         sys.unraisablehook = hook
 
 
-def _open(path: Path) -> Any:
-    """An asammdf MDF object, or DataError for an unreadable, corrupt or truncated file."""
+def open_mdf(path: Path, **kwargs: Any) -> Any:
+    """An asammdf MDF object (``kwargs`` go to ``MDF``), or DataError for an unreadable,
+    corrupt or truncated file."""
     try:
         from asammdf import MDF
     except ImportError as exc:  # a pinned dependency; only a broken install lacks it
         raise DataError(f"{path}: reading MDF4 needs the package asammdf ({exc})") from exc
 
     problem = None
-    with _quiet():
+    with quiet():
         try:
-            mdf = MDF(path)
+            mdf = MDF(path, **kwargs)
         except Exception as exc:  # asammdf raises many types for bad files
-            problem = _one_line(exc)
+            problem = one_line(exc)
         if problem is not None:
             gc.collect()  # the half-built MDF object's __del__ fails; let it do so quietly
     if problem is not None:
@@ -110,7 +110,7 @@ def _whole_match(name: str, pattern: str, mode: str, case_insensitive: bool) -> 
     return name.casefold() == pattern.casefold() if case_insensitive else name == pattern
 
 
-def _find(mdf: Any, src: ChannelSource, m: ChannelMapping, label: str, path: Path):
+def _find(mdf: Any, src: SourceRef, m: ChannelMapping, label: str, path: Path):
     """Resolve a mapped MDF channel to exactly one (name, group, index)."""
     pattern = str(src.column)
     opts = m.mdf
@@ -118,11 +118,11 @@ def _find(mdf: Any, src: ChannelSource, m: ChannelMapping, label: str, path: Pat
         names = [pattern]
     else:
         try:
-            with _quiet():
+            with quiet():
                 names = mdf.search(pattern, mode=opts.match, case_insensitive=opts.case_insensitive)
         except Exception as exc:  # a bad regex
             raise DataError(
-                f"{path}: {label}: bad {opts.match} pattern {pattern!r} ({_one_line(exc)})"
+                f"{path}: {label}: bad {opts.match} pattern {pattern!r} ({one_line(exc)})"
             ) from exc
     found = _occurrences(mdf, names, src.group)
     whole = [f for f in found if _whole_match(f[0], pattern, opts.match, opts.case_insensitive)]
@@ -146,30 +146,49 @@ def _find(mdf: Any, src: ChannelSource, m: ChannelMapping, label: str, path: Pat
     return found[0]
 
 
-def _targets(mdf: Any, m: ChannelMapping, path: Path) -> list[tuple[str, str, int, int]]:
-    """(channel, MDF name, group, index) of every channel to read."""
+@dataclass(frozen=True)
+class _Target:
+    """One MDF channel to read: the schema channel it feeds and where it is."""
+
+    channel: str
+    key: str
+    name: str
+    group: int
+    index: int
+    label: str
+    spec: ChannelSource
+
+
+def _targets(mdf: Any, m: ChannelMapping, path: Path) -> list[_Target]:
+    """Every source of every mapped channel, and the truth_* channels, resolved."""
     out = []
-    for ch in CHANNELS[1:]:
-        src = m.channels.get(ch.name)
-        if src is not None:
-            if src.column is None:
-                raise DataError(
-                    f"{path}: channel {ch.name!r}: the mapping gives a CAN {src.describe()}; "
-                    "an MDF log needs 'column' (the MDF channel name)"
-                )
-            out.append((ch.name, *_find(mdf, src, m, f"channel {ch.name!r}", path)))
-            continue
-        found = _occurrences(mdf, [ch.name], None)
-        if len(found) > 1:
+    for name, k, ref, spec in iter_sources(m):
+        if ref.column is None:
             raise DataError(
-                f"{path}: channel {ch.name!r}: {len(found)} MDF channels of that name; map it "
-                "with 'column' and 'group'"
+                f"{path}: channel {name!r}: the mapping gives a CAN {ref.describe()}; an MDF "
+                "log needs 'column' (the MDF channel name), or a bus-logging MDF4 and the "
+                "mapping's can.dbc"
             )
-        out += [(ch.name, *found[0])] if found else []
+        label = f"channel {name!r}"
+        if not m.is_mapped(name):
+            found = _occurrences(mdf, [name], None)
+            if len(found) > 1:
+                raise DataError(
+                    f"{path}: {label}: {len(found)} MDF channels of that name; map it "
+                    "with 'column' and 'group'"
+                )
+            if found:
+                out.append(_Target(name, source_key(name, k), *found[0], label, spec))
+            continue
+        ch, g, i = _find(mdf, ref, m, label, path)
+        full = label + (f" (MDF channel {ch!r})" if ch != name else "")
+        out.append(_Target(name, source_key(name, k), ch, g, i, full, spec))
     truth = sorted(n for n in mdf.channels_db if n.startswith(TRUTH_PREFIX))
     for name in truth:
         found = _occurrences(mdf, [name], None)
-        out += [(name, *found[0])] if len(found) == 1 else []
+        if len(found) == 1:
+            tspec = ChannelSource(column=name)
+            out.append(_Target(name, name, *found[0], f"channel {name!r}", tspec))
     return out
 
 
@@ -184,57 +203,53 @@ def _text(samples: np.ndarray) -> np.ndarray:
     )
 
 
-def _series(mdf: Any, target: tuple[str, str, int, int], m: ChannelMapping, path: Path) -> Series:
-    channel, name, g, i = target
-    label = f"channel {channel!r}" + (f" (MDF channel {name!r})" if name != channel else "")
+def _series(mdf: Any, tg: _Target, path: Path) -> Series:
     try:
-        with _quiet():
-            sig = mdf.get(name, group=g, index=i)
+        with quiet():
+            sig = mdf.get(tg.name, group=tg.group, index=tg.index)
     except Exception as exc:
         raise DataError(
-            f"{path}: {label}: cannot read the channel, corrupt or truncated file "
-            f"({_one_line(exc)})"
+            f"{path}: {tg.label}: cannot read the channel, corrupt or truncated file "
+            f"({one_line(exc)})"
         ) from exc
     samples, t = np.asarray(sig.samples), np.asarray(sig.timestamps, dtype=np.float64)
     if samples.ndim != 1 or samples.dtype.kind not in "biufOSU":
-        raise DataError(f"{path}: {label}: not a scalar channel (samples {samples.dtype})")
+        raise DataError(f"{path}: {tg.label}: not a scalar channel (samples {samples.dtype})")
     text = samples.dtype.kind in "OSU"
     values = _text(samples) if text else samples
-    src = m.channels.get(channel)
-    mode = src.interpolation if src is not None else "auto"
-    schema = CHANNEL_BY_NAME.get(channel)
+    mode = tg.spec.interpolation
+    schema = CHANNEL_BY_NAME.get(tg.channel)
     integer = schema is not None and schema.integer
     if mode == "auto":
         hold = integer or text or samples.dtype.kind in "biu"
     else:
         hold = mode == "hold" or integer
-    return Series(channel, name, label, t, values, hold, str(sig.unit or ""))
+    event = hold and (integer or text or samples.dtype.kind in "biu")
+    return Series(tg.channel, tg.key, tg.label, t, values, hold, str(sig.unit or ""), None, event)
 
 
-def read_mdf(path: Path, m: ChannelMapping) -> BusLog:
-    """Read one MDF4 log: mapped channels on the 100 Hz grid, ready for apply_mapping.
+def read_mdf(path: Path, m: ChannelMapping) -> LogRead:
+    """Read one (decoded) MDF4 log: every mapped source as a series, for the assembly.
 
     Args:
-        path: an existing, non-empty .mf4/.mdf file.
-        m: the channel mapping (``channels``, ``mdf``, ``resample``, ``time.start_at_zero``).
+        path: an existing, non-empty .mf4/.mdf file with physical channels (a bus-logging
+            file of raw CAN frames goes through :mod:`parknss.data.canlog` instead).
+        m: the channel mapping (``channels``, ``mdf``).
 
     Returns:
-        A BusLog: raw columns (grid time in s, channel values (T,) in source units), the
-        mapping that converts them, provenance and the header comment text.
+        A LogRead: one series per source (MDF time stamps, s; source units), the file's
+        header comment's parknss_trial metadata if it has one.
     """
-    mdf = _open(path)
+    mdf = open_mdf(path)
     try:
-        targets = _targets(mdf, m, path)
-        taken: set[str] = {TIME_KEY}
-        series = []
-        for target in targets:
-            s = _series(mdf, target, m, path)
-            key = unique_key(s.key, s.channel, taken)
-            series.append(Series(s.channel, key, s.label, s.t, s.values, s.hold, s.unit))
-        log = to_raw(series, m, str(path), "mdf4", m.mdf.use_file_units)
-        return BusLog(log.raw, log.applied, log.provenance, header_text(mdf))
+        series = [_series(mdf, tg, path) for tg in _targets(mdf, m, path)]
+        meta: dict = {}
+        text = header_text(mdf) or ""
+        if text.startswith(META_KEY):
+            meta = parse_meta(text[len(META_KEY) :], path)
+        return LogRead(series, "mdf4", use_file_units=m.mdf.use_file_units, meta=meta)
     finally:
-        with _quiet():
+        with quiet():
             mdf.close()
 
 
@@ -259,7 +274,7 @@ def write_mdf(channels: dict[str, np.ndarray], names: list[str], comment: str, p
         unit = ch.unit if ch is not None else ""
         signals.append(Signal(values, t, name=name, unit=unit))
     tmp = path.with_name(f".{path.stem}.tmp.mf4")
-    with _quiet():
+    with quiet():
         mdf = MDF(version=MDF_VERSION)
         try:
             mdf.header.comment = comment

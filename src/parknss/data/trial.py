@@ -22,6 +22,7 @@ MANEUVER_CLASSES: tuple[str, ...] = (
     "park_out_left",
     "park_out_right",
 )
+UNLABELLED = "unlabelled"  # class of trials whose file names carry no <class>_r<N>
 
 
 @dataclass
@@ -30,7 +31,7 @@ class Trial:
 
     Attributes:
         id: unique name within its campaign (e.g. ``park_in_left_r1``).
-        maneuver: one of MANEUVER_CLASSES (or a user's own class name).
+        maneuver: one of MANEUVER_CLASSES (or a user's own class name, or UNLABELLED).
         repetition: repetition index within the class, from 1.
         channels: channel name -> float64 array of shape (T,), schema units.
         vehicle_id: which vehicle the log comes from.

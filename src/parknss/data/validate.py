@@ -13,7 +13,7 @@ from typing import TypeVar
 
 import numpy as np
 import yaml
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from parknss.config import CONFIG_DIR, StrictModel
 from parknss.data.trial import Trial
@@ -37,10 +37,33 @@ class ValidationConfig(StrictModel):
     Attributes:
         min_samples: shortest accepted trial, samples (100 = 1 s at 100 Hz).
         dt_tolerance_s: every time step must lie within DT ± this, s.
+        ranges: plausible [lo, hi] per schema channel, schema units: wide enough for
+            any car on any road, narrow enough to catch a unit error (configs/data.yaml
+            is the one place they are written).
     """
 
     min_samples: int = Field(100, ge=2)
     dt_tolerance_s: float = Field(1.0e-3, gt=0.0, lt=DT / 2)
+    ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
+
+    @field_validator("ranges")
+    @classmethod
+    def _schema_ranges(cls, v: dict[str, tuple[float, float]]):
+        unknown = sorted(set(v) - set(CHANNEL_BY_NAME))
+        if unknown:
+            raise ValueError(f"not schema channels: {', '.join(unknown)}")
+        bad = [k for k, (lo, hi) in v.items() if not lo < hi]
+        if bad:
+            raise ValueError(f"range of {bad[0]!r} needs lo < hi")
+        return v
+
+    def range_of(self, name: str) -> tuple[float, float]:
+        """The plausible [lo, hi] of a schema channel in schema units (configs/data.yaml)."""
+        if name not in self.ranges:
+            raise ConfigError(
+                f"{DATA_CONFIG_YAML}: validation.ranges has no plausible range for {name!r}"
+            )
+        return self.ranges[name]
 
 
 def load_data_section(cls: type[M], section: str, path: str | Path | None = None) -> M:
@@ -110,9 +133,11 @@ def _check_metadata(trial: Trial, source: str) -> None:
         )
 
 
-def _as_vectors(trial: Trial, source: str) -> dict[str, np.ndarray]:
+def _as_vectors(trial: Trial, source: str, required) -> dict[str, np.ndarray]:
     """Required channels present; every channel 1-D and numeric; returned as float64."""
-    missing = [c for c in REQUIRED_CHANNELS if c not in trial.channels]
+    if "t" not in required:
+        raise TrialDataError(source, "the time channel is always required", "t")
+    missing = [c for c in required if c not in trial.channels]
     if missing:
         more = f" ({len(missing)} required channels missing: {', '.join(missing)})"
         raise TrialDataError(source, "missing" + (more if len(missing) > 1 else ""), missing[0])
@@ -204,9 +229,12 @@ def _check_gear(g: np.ndarray, t: np.ndarray, source: str) -> None:
         )
 
 
-def _check_range(name: str, arr: np.ndarray, t: np.ndarray, source: str) -> None:
+def _check_range(
+    name: str, arr: np.ndarray, t: np.ndarray, source: str, cfg: ValidationConfig
+) -> None:
     ch = CHANNEL_BY_NAME[name]
-    bad = np.flatnonzero((arr < ch.lo) | (arr > ch.hi))
+    lo, hi = cfg.range_of(name)
+    bad = np.flatnonzero((arr < lo) | (arr > hi))
     if not len(bad):
         return
     k = int(bad[np.argmax(np.abs(arr[bad]))])
@@ -215,19 +243,26 @@ def _check_range(name: str, arr: np.ndarray, t: np.ndarray, source: str) -> None
         hint = "; time must count from the trial start (see time.start_at_zero in a mapping)"
     raise TrialDataError(
         source,
-        f"{len(bad)} values outside the plausible range [{_fmt(ch.lo)}, {_fmt(ch.hi)}] "
+        f"{len(bad)} values outside the plausible range [{_fmt(lo)}, {_fmt(hi)}] "
         f"{ch.unit} (worst {_fmt(arr[k])} at {_at(t, k)}){hint}",
         name,
     )
 
 
-def validate_trial(trial: Trial, source: str, config: ValidationConfig | None = None) -> Trial:
+def validate_trial(
+    trial: Trial,
+    source: str,
+    config: ValidationConfig | None = None,
+    required: tuple[str, ...] | list[str] = REQUIRED_CHANNELS,
+) -> Trial:
     """Check one trial against the schema; return it with float64 channels, or raise.
 
     Args:
         trial: the trial to check (not modified).
         source: the file it came from, named in every error.
         config: tolerances (default: configs/data.yaml ``validation``).
+        required: the schema channels the trial must have (default all twelve; a
+            campaign whose mapping declares channels absent passes its own set).
 
     Returns:
         A Trial with the same metadata and every channel as a contiguous float64 (T,) array.
@@ -237,15 +272,17 @@ def validate_trial(trial: Trial, source: str, config: ValidationConfig | None = 
     """
     cfg = config or load_validation_config()
     _check_metadata(trial, source)
-    ch = _as_vectors(trial, source)
+    ch = _as_vectors(trial, source, required)
     _check_lengths(ch, source, cfg)
     t = ch["t"]
     _check_time(t, source, cfg)
     for name, arr in ch.items():
         _check_finite(name, arr, t, source)
-    _check_gear(ch["gear"], t, source)
+    if "gear" in ch:
+        _check_gear(ch["gear"], t, source)
     for name in REQUIRED_CHANNELS:
-        _check_range(name, ch[name], t, source)
+        if name in ch:
+            _check_range(name, ch[name], t, source, cfg)
     return Trial(
         id=trial.id,
         maneuver=trial.maneuver,

@@ -12,6 +12,10 @@ Rows are the moving-region vx MSE in (km/h)², the reverse-subset vx MSE and the
 moving-region yaw-rate MSE in (°/s)², per fold and as mean ± std over the folds, where
 std is the population standard deviation (ddof = 0), the convention that reproduces the
 paper's 0.108 ± 0.038 from its four fold values.
+
+A campaign that is not stratifiable (unlabelled trials, a class with fewer trials than
+folds, classes of different sizes) is split by plain k-fold instead
+(:func:`~parknss.data.splits.cv_plan`); the result says so in ``stratified`` and ``note``.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parknss.data.splits import DEFAULT_FOLDS, FoldPlan
 from parknss.experiments.executor import Job, run_jobs
 
 MODEL_VARIANTS: dict[str, tuple[str, dict]] = {
@@ -34,7 +39,7 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("vx_mse_reverse_kmh2", "rev. vx [(km/h)²]"),
     ("yaw_mse_moving_degs2", "ω_z [(°/s)²]"),
 )
-FOLDS = 4
+FOLDS = DEFAULT_FOLDS
 
 
 def merge(base: dict, extra: dict) -> dict:
@@ -55,11 +60,17 @@ def mean_std(values: list[float]) -> tuple[float, float]:
 
 @dataclass
 class CVResult:
-    """Fold results by model variant (each a list of FoldResult JSON, fold order)."""
+    """Fold results by model variant (each a list of FoldResult JSON, fold order).
+
+    ``stratified`` and ``note`` come from the fold plan (:class:`FoldPlan`): False and the
+    reason when the campaign was split by plain k-fold.
+    """
 
     folds: dict[str, list[dict]]
     overrides: dict = field(default_factory=dict)
     wall_s: float = 0.0
+    stratified: bool = True
+    note: str = ""
 
     def column(self, variant: str, key: str, reference: str = "errors") -> list[float]:
         """One metric over the folds of a variant (NaN where absent)."""
@@ -85,7 +96,11 @@ class CVResult:
     def table(self) -> str:
         """Table II as text: NSS per fold and mean ± std, then the baselines' mean ± std."""
         head = f"{'':36s}" + "".join(f"{label:>22s}" for _, label in COLUMNS)
-        lines = ["Table II: stratified 4-fold CV on held-out maneuvers (moving region)", head]
+        kind = "stratified" if self.stratified else "plain"
+        lines = [f"Table II: {kind} {FOLDS}-fold CV on held-out maneuvers (moving region)"]
+        if self.note:
+            lines.append(self.note)
+        lines.append(head)
         if "nss" in self.folds:
             for i, _ in enumerate(self.folds["nss"]):
                 cells = "".join(f"{self.column('nss', k)[i]:>22.3f}" for k, _ in COLUMNS)
@@ -108,6 +123,8 @@ class CVResult:
             "summary_truth": self.summary("truth_errors"),
             "overrides": self.overrides,
             "wall_s": self.wall_s,
+            "stratified": self.stratified,
+            "note": self.note,
         }
 
 
@@ -149,8 +166,13 @@ def run_cv(
     cache_dir: str | Path | None = None,
     save_dir: str | Path | None = None,
     progress: bool = True,
+    plan: FoldPlan | None = None,
 ) -> CVResult:
-    """Run the CV of every variant (default: nss, nss_direct_yaw, linear) on the same folds."""
+    """Run the CV of every variant (default: nss, nss_direct_yaw, linear) on the same folds.
+
+    ``plan``: the campaign's CV fold plan, for the result's ``stratified`` and ``note``
+    (computed from the campaign when not given; the fold jobs build the same folds).
+    """
     import time
 
     variants = list(variants or MODEL_VARIANTS)
@@ -174,4 +196,9 @@ def run_cv(
     folds: dict[str, list[dict]] = {v: [] for v in variants}
     for (var, _), res in zip(pairs, results, strict=True):
         folds[var].append(res)
-    return CVResult(folds, overrides, time.perf_counter() - t0)
+    if plan is None:
+        from parknss.data.splits import cv_plan
+        from parknss.nss.campaigns import load_campaign
+
+        plan = cv_plan(load_campaign(data))
+    return CVResult(folds, overrides, time.perf_counter() - t0, plan.stratified, plan.note)

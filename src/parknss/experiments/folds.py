@@ -3,10 +3,13 @@
 :func:`fold_job` is the unit every NSS study is made of (Table II, the learning curve, the
 seed-noise floor, the ablations, the limiter study): it loads the campaign, builds the
 split (``split="cv"``: the stratified k-fold of :func:`~parknss.data.splits.stratified_folds`;
-``split="leave"``: the leave-r-repeats-out grid), fits the model named by ``model`` and
-rolls it out open loop over every held-out trial's whole length. Its arguments and its
-result are plain JSON, so the same job runs in-process, on the local pool or on Ray and is
-cached by the executor under the hash of its arguments.
+``split="leave"``: the leave-r-repeats-out grid; on a campaign that is not stratifiable,
+unlabelled trials or too few per class, their plain k-fold fallbacks of
+:func:`~parknss.data.splits.cv_plan` / :func:`~parknss.data.splits.leave_r_out_plan`),
+fits the model named by ``model`` and rolls it out open loop over every held-out trial's
+whole length. Its arguments and its result are plain JSON, so the same job runs
+in-process, on the local pool or on Ray and is cached by the executor under the hash of
+its arguments.
 
 Models: ``"nss"`` (the NSS with the given config overrides), ``"linear"`` (the
 least-squares linear state-space baseline of :mod:`parknss.nss.linear`). The direct-yaw
@@ -20,7 +23,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from parknss.data.splits import Fold, leave_r_out, stratified_folds
+from parknss.data.splits import Fold, FoldPlan, cv_plan, leave_r_out_plan
 from parknss.data.trial import Campaign
 from parknss.errors import ConfigError
 from parknss.metrics.errors import logged_and_truth_errors
@@ -60,16 +63,21 @@ class FoldResult:
         return asdict(self)
 
 
+def fold_plan(campaign: Campaign, split: str, r: int = 1, seed: int | None = None) -> FoldPlan:
+    """The folds of ``split`` ("cv", or "leave" with r held-out repeats per class), with the
+    plain k-fold fallback for a campaign that is not stratifiable (see FoldPlan.note)."""
+    if split == "cv":
+        return cv_plan(campaign, seed=seed)
+    if split == "leave":
+        return leave_r_out_plan(campaign, r, seed=seed)
+    raise ConfigError(f"split must be 'cv' or 'leave', got {split!r}")
+
+
 def make_fold(
     campaign: Campaign, split: str, index: int, r: int = 1, seed: int | None = None
 ) -> Fold:
-    """The fold ``index`` of the split ("cv" or "leave" with r held-out repeats per class)."""
-    if split == "cv":
-        folds = stratified_folds(campaign, seed)
-    elif split == "leave":
-        folds = leave_r_out(campaign, r, seed)
-    else:
-        raise ConfigError(f"split must be 'cv' or 'leave', got {split!r}")
+    """The fold ``index`` of :func:`fold_plan`."""
+    folds = fold_plan(campaign, split, r, seed).folds
     if not 0 <= index < len(folds):
         raise ConfigError(f"fold index {index} out of range 0..{len(folds) - 1}")
     return folds[index]

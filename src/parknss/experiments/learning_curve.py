@@ -5,6 +5,12 @@ Leave-r-repeats-out with r = 1, 2, 3 (four folds each) on 16 trials gives traini
 boxes) and their mean; a power law e(n) = a·n^(-b) fitted to the fold means by least squares
 in log-log space is extrapolated to the all-trials deployment model (n = 16), whose
 held-out error cannot be measured because no trial is left out.
+
+On a campaign that is not stratifiable (unlabelled trials, a class with fewer trials than
+folds, classes of different sizes) the grid falls back to seeded random subsets of each
+plain k-fold fold's training trials of the same sizes, scored on that fold's held-out
+trials (:func:`~parknss.data.splits.leave_r_out_plan`); the result says so in
+``stratified`` and ``note``.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from parknss.data.splits import DEFAULT_FOLDS, stratify_problem
 from parknss.errors import DataError
 from parknss.experiments.config import ExperimentsConfig, merge_overrides
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, nanmean
@@ -61,12 +68,15 @@ class CurvePoint:
 
 @dataclass
 class LearningCurveResult:
-    """Points by increasing training-set size and the fits per channel."""
+    """Points by increasing training-set size and the fits per channel; ``stratified``
+    False and ``note`` saying why when the grid fell back to random training subsets."""
 
     points: list[CurvePoint]
     fits: dict[str, PowerLaw]
     extrapolate_to: int
     epochs: int
+    stratified: bool = True
+    note: str = ""
 
     def sizes(self) -> list[int]:
         return [p.n_train for p in self.points]
@@ -98,12 +108,30 @@ class LearningCurveResult:
             ],
             "fits": {k: asdict(v) for k, v in self.fits.items()},
             "extrapolated": {k: self.extrapolated(k) for k in self.fits},
+            "stratified": self.stratified,
+            "note": self.note,
         }
+
+
+def grid_note(
+    campaign, rs: list[int] | tuple[int, ...], k: int = DEFAULT_FOLDS
+) -> tuple[bool, str]:
+    """(stratified, one-line note) of the learning-curve grid on ``campaign``."""
+    problem = stratify_problem(campaign, k)
+    r_list = ", ".join(map(str, rs))
+    if problem is None:
+        return True, f"stratified leave-r-repeats-out, r = {r_list}, in every maneuver class"
+    return False, (
+        f"not stratifiable ({problem}): leave-r-repeats-out (r = {r_list}) replaced by "
+        f"seeded random subsets of the same sizes of each plain {k}-fold fold's training "
+        "trials, scored on that fold's held-out trials"
+    )
 
 
 def learning_curve(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> LearningCurveResult:
     """Fit every (r, fold) of the grid at the budget's epochs; fit and extrapolate."""
     budget = cfg.budget(quick)
+    stratified, note = grid_note(sweep.campaign(), cfg.learning_curve_rs)
     ov = merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs}})
     grid = [(r, k) for r in cfg.learning_curve_rs for k in budget.folds]
     jobs = [fold_spec(sweep, "leave", k, ov, r=r, name=f"leave{r} fold{k}") for r, k in grid]
@@ -119,4 +147,6 @@ def learning_curve(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> Learnin
     for ch in ("vx", "yaw"):
         with contextlib.suppress(DataError):
             fits[ch] = fit_power_law([p.n_train for p in points], [p.mean(ch) for p in points])
-    return LearningCurveResult(points, fits, cfg.extrapolate_to, budget.epochs)
+    return LearningCurveResult(
+        points, fits, cfg.extrapolate_to, budget.epochs, stratified=stratified, note=note
+    )

@@ -45,10 +45,28 @@ def default_campaign(seed: int = 0) -> Campaign:
     return campaign
 
 
-def load_campaign(data: str | Path | None) -> Campaign:
-    """``data`` folder if given, else :func:`default_campaign`."""
-    if data is None:
-        return default_campaign()
-    from parknss.data.io import read_campaign
+def campaign_label(command: str, data: str | Path | None) -> str:
+    """How messages name a command and its campaign: ``"parknss train --data DIR"``."""
+    return f"{command} --data {data}" if data is not None else f"{command} (default campaign)"
 
-    return read_campaign(data)
+
+def load_campaign(
+    data: str | Path | None, workflow: str | None = None, command: str = "parknss"
+) -> Campaign:
+    """``data`` folder if given, else :func:`default_campaign`.
+
+    With ``workflow`` (a key of :data:`parknss.data.workflows.WORKFLOWS`), a campaign that
+    lacks a channel the workflow needs, or whose trials differ in their channels, is
+    refused with one DataError line naming ``command``, the campaign and the channels.
+    """
+    if data is None:
+        campaign = default_campaign()
+    else:
+        from parknss.data.io import read_campaign
+
+        campaign = read_campaign(data)
+    if workflow is not None:
+        from parknss.data.workflows import require
+
+        require(campaign, workflow, campaign_label(command, data))
+    return campaign
