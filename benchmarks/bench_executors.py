@@ -16,8 +16,8 @@ import json
 import os
 import time
 
+from parknss.executor import run_jobs
 from parknss.experiments.config import load_experiments_config, merge_overrides
-from parknss.experiments.executor import run_jobs
 from parknss.experiments.sweep import Sweep, fold_spec
 
 

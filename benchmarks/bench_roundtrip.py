@@ -172,7 +172,7 @@ def fit_all(
     data: Path, rows: list[dict], epochs: int, seeds: list[int], workers: int, cache: Path
 ) -> dict:
     """Fold-0 NSS fits: the original with every seed, each distinct re-import with seeds[0]."""
-    from parknss.experiments.executor import Job, run_jobs
+    from parknss.executor import Job, run_jobs
 
     fn = "parknss.experiments.folds:fold_job"
 

@@ -92,3 +92,42 @@ def test_bad_selection_file_is_a_one_line_error(env, capsys, tmp_path):
                                  str(env / "data"), "--selection", str(bad), "--out",
                                  str(tmp_path / "c")])
     assert code == 2 and "no winners" in err
+
+
+@pytest.mark.slow
+def test_phase_a_through_a_process_pool_equals_in_process(env):
+    """The study's Phase A fits are executor jobs: a 2-worker pool gives the very models
+    and scores the in-process run gives (each fit seeds itself from its name)."""
+    from parknss.actuators.envelopes import identify_envelope
+    from parknss.actuators.phase_a import Fanout, phase_a
+    from parknss.actuators.spec import CandidateSpec
+    from parknss.data.io import read_campaign
+
+    camp = read_campaign(env / "data")
+    cfg = tiny_config()
+    train, val = [t.id for t in camp][:5], [t.id for t in camp][5:7]
+    envl = identify_envelope([t for t in camp if t.id in train], cfg.envelope)
+    specs = [CandidateSpec.parse(n) for n in ("drive/narx/uniform", "brake/gru/cmd")]
+    args = (specs, str(env / "data"), train, val, cfg, envl)
+    one = phase_a(*args, fanout=Fanout(workers=1))
+    two = phase_a(*args, fanout=Fanout(workers=2))
+    for a, b in zip(one, two, strict=True):
+        assert a.label == b.label and a.score.mse == b.score.mse
+        for k, v in a.model.state_dict().items():
+            assert torch.equal(v, b.model.state_dict()[k]), k
+
+
+def test_build_refuses_an_existing_chain_unless_overwrite(env, capsys, tmp_path):
+    sel = tmp_path / "sel.json"
+    sel.write_text(json.dumps({"winners": {"drive": "drive/lag1/cmd", "brake": "brake/lag1/cmd",
+                                           "steering": "steering/lag1/cmd"}}))
+    out = tmp_path / "chain"
+    base = ["actuators", "build", "--nss", str(env / "nss"), "--data", str(env / "data"),
+            "--config", str(env / "act.yaml"), "--selection", str(sel), "--out", str(out)]
+    assert _run(capsys, base)[0] == 0
+    first = (out / "chain.json").read_bytes()
+    code, _, err = _run(capsys, base)
+    assert code == 2 and "holds a chain (chain.json) already; pass --overwrite" in err
+    assert (out / "chain.json").read_bytes() == first
+    assert _run(capsys, [*base, "--overwrite"])[0] == 0
+    assert (out / "chain.json").is_file()

@@ -8,11 +8,11 @@ import pytest
 import torch
 
 from actuators_tiny import tiny_campaign, tiny_config, tiny_nss
-from parknss.actuators.cotune import cotune
 from parknss.actuators.envelopes import identify_envelope
-from parknss.actuators.evaluate import chain_score, make_chain
 from parknss.actuators.fit import fit_candidate
 from parknss.actuators.spec import CandidateSpec
+from parknss.chain.cotune import cotune
+from parknss.chain.score import chain_score, make_chain
 
 torch.set_num_threads(1)
 

@@ -1,4 +1,5 @@
-"""Envelopes: identified numbers, the NaN/inf rule, and no violation under stress."""
+"""Envelopes: identified numbers, the NaN/inf rule, the real-time twin against the batched
+rules, and no violation under stress."""
 
 from __future__ import annotations
 
@@ -7,12 +8,17 @@ import pytest
 import torch
 
 from actuators_tiny import tiny_campaign, tiny_config, tiny_nss
-from parknss.actuators.envelopes import EnvelopeState, clean_commands, identify_envelope
-from parknss.actuators.evaluate import make_chain
+from parknss.actuators.envelopes import (
+    EnvelopeState,
+    clean_commands,
+    identify_envelope,
+    limit_outputs_torch,
+)
 from parknss.actuators.fit import fit_candidate
 from parknss.actuators.spec import CandidateSpec
-from parknss.actuators.stress import run_stress
 from parknss.chain import DeployedChain
+from parknss.chain.score import make_chain
+from parknss.chain.stress import run_stress
 from parknss.plant import Commands
 from parknss.signals import DT
 
@@ -55,6 +61,33 @@ def test_nan_holds_and_inf_clamps_in_both_paths():
     assert list(batched[2, 1:]) == [env.cmd_hi[0], env.cmd_lo[1], env.cmd_lo[2]]  # clamped
     assert batched[3, 0] == 1 and batched[3, 2] == 0.0 and batched[3, 3] == env.cmd_hi[2]
     assert st.activity.nonfinite["torque_cmd"] == 3
+
+
+def test_output_envelope_twin_equals_the_batched_rule():
+    """EnvelopeState.output (real time, floats) against limit_outputs_torch over a whole
+    history and sample by sample: floors, rate limit, lock; and measured channels pass."""
+    env = identify_envelope(list(tiny_campaign()), tiny_config().envelope)
+    rng = np.random.default_rng(5)
+    T = 400
+    y = rng.uniform([-80, -30, -900], [300, 60, 900], (T, 3))
+    y[::7, 2] = rng.uniform(-50, 50, len(y[::7]))  # small moves the rate limit lets pass
+    st = EnvelopeState(env)
+    st.reset(steer=12.0)
+    twin = np.array([st.output(*row) for row in y])
+    t = torch.as_tensor(y.T[:, None, :])  # (3, B=1, T)
+    steer0 = torch.tensor([12.0], dtype=torch.float64)
+    batched = np.stack([v[0].numpy() for v in limit_outputs_torch(env, *t, steer0)], axis=1)
+    assert np.max(np.abs(batched - twin)) == 0.0
+    prev, rows = steer0, []
+    for k in range(T):
+        s = [torch.tensor([v], dtype=torch.float64) for v in y[k]]
+        out = limit_outputs_torch(env, *s, prev)
+        prev = out[2]
+        rows.append([float(v[0]) for v in out])
+    assert np.max(np.abs(np.array(rows) - twin)) == 0.0
+    assert st.activity.steer_rate > 0 and st.activity.output_floor["torque"] > 0
+    kept = limit_outputs_torch(env, *t, steer0, modelled=(False, True, False))
+    assert torch.equal(kept[0], t[0]) and torch.equal(kept[2], t[2])
 
 
 def test_random_extreme_and_nan_commands_stay_in_the_envelope(deployed):

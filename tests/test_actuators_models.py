@@ -10,10 +10,11 @@ import pytest
 import torch
 
 from actuators_tiny import lag, lagged_trial, tiny_config
+from parknss.actuators.candidates import CANDIDATES, build_candidate
 from parknss.actuators.config import ArchConfig
 from parknss.actuators.envelopes import identify_envelope
 from parknss.actuators.fit import fit_candidate, step_metrics
-from parknss.actuators.models import Scaling, build_candidate
+from parknss.actuators.models import Scaling
 from parknss.actuators.scan import matrix_scan, scalar_scan
 from parknss.actuators.spec import ALL_ARCHS, VARIANTS, CandidateSpec
 from parknss.errors import ConfigError
@@ -115,6 +116,17 @@ def test_rollout_step_and_numpy_twin_agree(arch, variant):
     c1, f1 = cmd[1].numpy(), feat[1].numpy()
     yn = np.array([s.step(float(c1[k]), f1[k]) for k in range(T)])
     assert np.max(np.abs(yn - Y[1].numpy())) < 1e-10
+
+
+def test_every_architecture_name_has_one_implementation():
+    """The spec vocabulary and the implementation table agree; each class names its twin
+    and its fitting budget (no other lookup table)."""
+    assert set(CANDIDATES) == set(ALL_ARCHS)
+    for cls in CANDIDATES.values():
+        assert cls.fit_family in ("linear", "neural")
+        assert callable(cls.stepper_cls)
+    assert {a for a, c in CANDIDATES.items() if c.fit_family == "linear"} == {
+        "lag1", "lag2", "static"}
 
 
 def test_bad_specs_are_one_line_errors():

@@ -1,5 +1,6 @@
 """The command-to-vehicle chain: batched rollout = real-time step to 1e-10 in float64, the
-artefact round trip, refusal of corrupt artefacts, and the Plant protocol."""
+NumPy NSS twin = the NSS's own step, the artefact round trip, refusal of corrupt
+artefacts, and the Plant protocol."""
 
 from __future__ import annotations
 
@@ -12,11 +13,11 @@ import torch
 
 from actuators_tiny import tiny_campaign, tiny_config, tiny_nss
 from parknss.actuators.envelopes import identify_envelope
-from parknss.actuators.evaluate import make_chain
 from parknss.actuators.fit import fit_candidate
 from parknss.actuators.spec import CandidateSpec
 from parknss.chain import (
     DeployedChain,
+    NSSProvenance,
     chain_predictions,
     load_chain,
     predict_chain_campaign,
@@ -24,6 +25,8 @@ from parknss.chain import (
     rollout_trials,
     save_chain,
 )
+from parknss.chain.realtime import NumpyNSS
+from parknss.chain.score import make_chain
 from parknss.errors import CheckpointError
 from parknss.plant import Commands, Plant
 
@@ -74,6 +77,35 @@ def test_batched_rollout_equals_real_time_step(setup, kind):
         assert np.max(np.abs(act - r.actuals[i, :n].numpy())) < 1e-10
 
 
+@pytest.mark.parametrize("residual_yaw", [True, False])
+def test_numpy_nss_twin_equals_the_nss_step(setup, residual_yaw):
+    """The real-time twin of the NSS against its one source, NSSModel.step: the same
+    Euler step and yaw readout sample by sample over a whole trial (float64)."""
+    from parknss.nss.config import with_overrides
+    from parknss.nss.train import build_model
+
+    camp, nss, ncfg, *_ = setup
+    cfg = with_overrides(ncfg, model={"residual_yaw": residual_yaw})
+    model = build_model(cfg, nss.normalizer, nss.geometry).double().eval()
+    twin = NumpyNSS(model)
+    tr = camp[0]
+    u = tr.array(("gear", "torque", "brake_pressure", "steer"))
+    x0 = np.array([tr["vx"][0], tr["yaw_rate"][0]])
+    with torch.no_grad():
+        state = model.initial_state(torch.as_tensor(x0)[None], torch.as_tensor(u[:1]))
+    x = twin.initial_state(x0, u[0])
+    assert np.max(np.abs(x - state[0].numpy())) < 1e-12
+    for k in range(tr.n):
+        with torch.no_grad():
+            out, state = model.step(state, torch.as_tensor(u[k : k + 1]))
+        us = twin.scale_u(u[k])
+        got = twin.readout(x, us)
+        want = [float(getattr(out, n)[0, 0]) for n in ("vx", "yaw_rate", "ax", "ay")]
+        assert np.max(np.abs(np.subtract(got, want))) < 1e-10, k
+        x = twin.advance(x, us)
+        assert np.max(np.abs(x - state[0].numpy())) < 1e-10, k
+
+
 def test_partial_chain_real_time_equals_torch(setup):
     camp, nss, _, env, _, aware = setup
     chain = make_chain(nss, {"drive": aware["drive"]}, env)  # brake, steering measured
@@ -97,12 +129,13 @@ def test_all_measured_chain_is_the_nss(setup):
 
 def test_artefact_round_trip_and_plant(setup, tmp_path):
     camp, nss, ncfg, env, cmd_models, _ = setup
-    chain = make_chain(nss, cmd_models, env)
-    chain.nss_config = ncfg
+    chain = make_chain(nss, cmd_models, env, NSSProvenance(ncfg, {"epochs": 7}))
     folder = save_chain(tmp_path / "chain", chain, {"note": "test"})
     dep = load_chain(folder)
     assert isinstance(dep, Plant)
     assert dep.meta["note"] == "test"
+    assert dep.chain.provenance.config == ncfg
+    assert dep.chain.provenance.training["epochs"] == 7
     p0 = chain_predictions(chain, list(camp)[:2])
     p1 = predict_chain_campaign(folder, list(camp)[:2])
     for tid in p0:
@@ -157,8 +190,7 @@ def _corrupt(tmp_path, folder, how):
 ])
 def test_corrupt_artefacts_are_refused_in_one_line(setup, tmp_path, how, msg):
     _camp, nss, ncfg, env, cmd_models, _ = setup
-    chain = make_chain(nss, cmd_models, env)
-    chain.nss_config = ncfg
+    chain = make_chain(nss, cmd_models, env, NSSProvenance(ncfg))
     folder = save_chain(tmp_path / "chain", chain, {})
     bad = _corrupt(tmp_path, folder, how)
     with pytest.raises(CheckpointError, match=msg) as ei:

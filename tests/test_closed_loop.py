@@ -1,25 +1,24 @@
 """The closed loop: completion on hand-made and planned scenes, collision, livelock and
-timeout detection, the grid job and summary, the tuning descent and the commands."""
+timeout detection, one scene and the grid job and summary (library), the tuning descent,
+and one smoke test per command (simulate, grid, tune)."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from parknss.cli import main
+from parknss.report.sim_figures import draw_scene_run
 from parknss.sim import geometry
-from parknss.sim.closed_loop import (
-    ClosedLoopConfig,
-    cell_job,
-    execute,
-    load_closed_loop_config,
-    summarize,
-)
+from parknss.sim.closed_loop import ClosedLoopConfig, execute, load_closed_loop_config
 from parknss.sim.control.interface import InterfaceConfig
-from parknss.sim.plants import Actuation, KinematicPlant, ReferencePlant
+from parknss.sim.grid import cell_job, run_grid_report, summarize, table_v
+from parknss.sim.plants import KinematicPlant, ReferencePlant
 from parknss.sim.scenarios import Obstacle, Scene
+from parknss.sim.session import simulate_scene, summary_text
 from parknss.sim.tuning import TuningConfig, coordinate_descent, objective
 from parknss.vehicle import VehicleGeometry
 from test_sim_tracker import arc_scene
@@ -69,8 +68,9 @@ def test_collision_is_detected_at_the_first_contact():
 class DeadDrive(KinematicPlant):
     """A car whose drive never moves it (livelock bait)."""
 
-    def advance(self, act: Actuation):
-        return super().advance(Actuation(act.commands, 0.0))
+    def step(self, cmd):
+        self.speed_target = 0.0
+        return super().step(cmd)
 
 
 def test_livelock_and_timeout_are_detected():
@@ -107,18 +107,48 @@ def test_coordinate_descent_finds_a_bowl_minimum():
     assert res.gains["ki"] == pytest.approx(0.6, rel=0.1)
 
 
-def test_simulate_and_grid_commands_print_one_json(tmp_path, capsys):
-    assert main(["simulate", "--scene", "26", "--json", "--out", str(tmp_path)]) == 0
-    doc = json.loads(capsys.readouterr().out)
+def test_one_scene_is_planned_once_driven_and_drawn(tmp_path):
+    run = simulate_scene("26", ["kinematic", "reference"])
+    doc = run.to_json()
     for key in ("completed", "goal_error_cm", "heading_error_deg", "clearance_cm", "duration_s"):
         assert key in doc
-    assert doc["completed"] and (tmp_path / doc["figures"]["fig8"].split("/")[-1]).is_file()
-    args = ["grid", "--grid", "36", "--cells", "26", "--plants", "kinematic", "--json"]
-    assert main([*args, "--out", str(tmp_path)]) == 0
-    doc = json.loads(capsys.readouterr().out)
-    assert doc["summary"]["kinematic"]["completed"] == 1
+    assert doc["completed"] and [r["plant"] for r in doc["runs"]] == ["kinematic", "reference"]
+    assert doc["plan"]["trajectory"] == run.plan.trajectory.digest()
+    assert doc["planned_length_m"] == run.plan.trajectory.length
+    figures = draw_scene_run(run, tmp_path)
+    assert set(figures) == {"fig8", "fig9"}
+    assert all(Path(p).is_file() for p in figures.values())
+    series = run.write_series(tmp_path)
+    assert Path(series["reference"]).read_text().startswith("t,x,y,heading")
+    assert "reference" in summary_text(doc)
+
+
+def test_grid_report_writes_the_cells_and_table_v(tmp_path):
+    doc = run_grid_report("36", ["kinematic"], tmp_path, cells="26")
+    assert doc["summary"]["kinematic"]["completed"] == 1 and doc["cells"] == 1
     assert (tmp_path / "grid_36_cells.csv").read_text().count("\n") == 2
+    assert json.loads((tmp_path / "grid_36.json").read_text())["summary"] == doc["summary"]
+    assert "Completed maneuvers" in table_v(doc["summary"])
+
+
+def test_simulate_command_prints_one_json(tmp_path, capsys):
+    assert main(["simulate", "--scene", "26", "--json", "--out", str(tmp_path)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["completed"] and (tmp_path / doc["figures"]["fig8"].split("/")[-1]).is_file()
     assert main(["simulate", "--scene", "26", "--plant", "bicycle"]) == 2
+    assert "unknown plant" in capsys.readouterr().err
+
+
+def test_grid_command_prints_one_json(tmp_path, capsys):
+    args = ["grid", "--grid", "36", "--cells", "26", "--plants", "kinematic", "--json"]
+    assert main([*args, "--executor", "local", "--out", str(tmp_path)]) == 0
+    assert json.loads(capsys.readouterr().out)["summary"]["kinematic"]["completed"] == 1
+    assert main(["grid", "--grid", "35"]) == 2
+    assert "--grid '35'" in capsys.readouterr().err
+
+
+def test_tune_command_refuses_an_unknown_plant(tmp_path, capsys):
+    assert main(["tune", "--plant", "bicycle", "--out", str(tmp_path)]) == 2
     assert "unknown plant" in capsys.readouterr().err
 
 

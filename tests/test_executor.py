@@ -3,7 +3,7 @@ import json
 import pytest
 
 from parknss.errors import ConfigError
-from parknss.experiments.executor import Job, ResultCache, run_jobs
+from parknss.executor import Job, ResultCache, run_jobs
 
 PROBE = "parknss.experiments.probe:probe_fit"
 

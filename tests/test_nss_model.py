@@ -1,4 +1,5 @@
-"""NSSModel: step == rollout, the residual yaw readout, no gear in g, integrator orders."""
+"""NSSModel: step == rollout, the per-sample step function == integrate, the residual yaw
+readout, no gear in g, integrator orders."""
 
 from __future__ import annotations
 
@@ -53,6 +54,25 @@ def test_step_reproduces_rollout(integrator, limited):
         with torch.no_grad():
             free = m.rollout(x0, u)
         assert (free.vx - r.vx).abs().max() > 1e-3
+
+
+@pytest.mark.parametrize("integrator", ["euler", "rk4"])
+def test_step_function_is_integrate(integrator):
+    """The chain's per-sample integrator (weights taken out once) is the model's own step,
+    to the bit, and reconstruct_yaw is the readout's yaw."""
+    m, _ = tiny_model(CAMP, seed=4, model={"integrator": integrator})
+    m = m.double()
+    x0, u = _moving_case(40)
+    step = m.step_function()
+    with torch.no_grad():
+        u_s = m.scale_inputs(u)
+        x = m.initial_state_scaled(x0, u_s[:, 0])
+        for k in range(u.shape[1]):
+            assert torch.equal(step(x, u_s[:, k]), m.integrate(x, u_s[:, k]))
+            x = m.integrate(x, u_s[:, k])
+        r = m.rollout(x0, u)
+        yaw_s = m.reconstruct_yaw(r.state_s, u_s[..., I_STEER])[2]
+    assert torch.equal(m.yaw_phys(yaw_s), r.yaw_rate)
 
 
 def test_residual_readout_and_initial_decomposition():

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import sys
-import types
 
 import numpy as np
 import pytest
@@ -152,13 +150,6 @@ def test_rate_replay_truth_json(campaign_dir, tmp_path, capsys):
     assert doc["summary"]["mean_filtered"] > 0.7
 
 
-def test_rate_model_without_predictor_is_a_clear_error(campaign_dir, tmp_path, monkeypatch, capsys):
-    monkeypatch.setitem(sys.modules, "parknss.nss.predict", None)  # import fails
-    code = main(["rate", "--model", "m.safetensors", "--data", str(campaign_dir)])
-    assert code == 2
-    assert "no model predictor is available yet" in capsys.readouterr().err
-
-
 def test_rate_model_through_a_predictor(campaign_dir, tmp_path, monkeypatch, capsys):
     """A stand-in predictor (the truth, lagged 3 samples) exercises the --model path."""
     from parknss.data.io import read_campaign
@@ -171,9 +162,9 @@ def test_rate_model_through_a_predictor(campaign_dir, tmp_path, monkeypatch, cap
             for tr in campaign
         }  # fmt: skip
 
-    fake = types.ModuleType("parknss.nss.predict")
-    fake.predict_campaign = predict_campaign
-    monkeypatch.setitem(sys.modules, "parknss.nss.predict", fake)
+    import parknss.chain.rating
+
+    monkeypatch.setattr(parknss.chain.rating, "predict_campaign", predict_campaign)
     model = tmp_path / "model.json"
     model.write_text("{}")
     out = tmp_path / "r"

@@ -9,7 +9,7 @@ from shapely.geometry import MultiPoint, Point, Polygon
 from parknss.errors import PlanningError
 from parknss.sim import geometry as g
 from parknss.sim.planning.reeds_shepp import arc_poses
-from parknss.vehicle import VehicleGeometry
+from parknss.vehicle import VehicleGeometry, arc_step
 
 G = VehicleGeometry()
 
@@ -137,3 +137,36 @@ def test_inside_bounds():
     assert g.inside_bounds([(0, 0, 0)], G, bounds)[0]
     assert not g.inside_bounds([(7.0, 0, 0)], G, bounds)[0]  # front bumper at 10.95
     assert g.inside_bounds([(5.9, 0, 0)], G, bounds)[0]
+
+
+def test_arc_interpolation_lies_on_the_arc_step():
+    """geometry.arc_interpolate (the arc through two poses) against vehicle.arc_step (the
+    arc from a pose and a curvature), forward and reverse, straight and curved."""
+    rng = np.random.default_rng(1)
+    n = 300
+    p0 = np.column_stack([rng.uniform(-5, 5, n), rng.uniform(-5, 5, n), rng.uniform(-3, 3, n)])
+    kappa = np.where(rng.random(n) < 0.2, 0.0, rng.uniform(-0.22, 0.22, n))
+    s = rng.uniform(-2.0, 2.0, n)  # signed travel: reverse pairs too
+    p1 = np.column_stack(arc_step(p0[:, 0], p0[:, 1], p0[:, 2], s, kappa * s))
+    tau = rng.uniform(0.0, 1.0, n)
+    want = np.column_stack(arc_step(p0[:, 0], p0[:, 1], p0[:, 2], tau * s, tau * kappa * s))
+    np.testing.assert_allclose(g.arc_interpolate(p0, p1, tau), want, atol=1e-12)
+
+
+def test_collision_broad_phase_changes_nothing():
+    """geometry.collides (bounding-circle broad phase, then SAT) equals SAT on every pair,
+    also for poses grazing an obstacle."""
+    rng = np.random.default_rng(2)
+    geom = VehicleGeometry()
+    obstacles = [g.rectangle(x, y, 4.9, 1.9, a) for x, y, a in rng.uniform(-6, 6, (6, 3))]
+    poses = np.column_stack(
+        [rng.uniform(-9, 9, 3000), rng.uniform(-9, 9, 3000), rng.uniform(-3.2, 3.2, 3000)]
+    )
+    fp = g.footprints(poses, geom)
+    brute = np.zeros(len(poses), dtype=bool)
+    for obs in obstacles:
+        brute |= g.intersects(fp, obs)
+    assert 100 < brute.sum() < len(poses) - 100
+    np.testing.assert_array_equal(g.collides(poses, geom, obstacles), brute)
+    cx, cy, r = g.body_circles(poses, geom)
+    assert np.all(np.hypot(fp[..., 0] - cx[:, None], fp[..., 1] - cy[:, None]) <= r + 1e-9)

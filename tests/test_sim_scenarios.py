@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from parknss.errors import PlanningError
+from parknss.errors import ConfigError, PlanningError
 from parknss.sim import geometry as g
 from parknss.sim import scenarios as sc
 from parknss.vehicle import VehicleGeometry
@@ -182,3 +182,19 @@ def test_unreadable_scene_files(tmp_path):
 
 def test_config_file_matches_defaults():
     assert sc.load_scenarios_config() == sc.ScenariosConfig()
+
+
+def test_grid_cells_and_scene_names(tmp_path):
+    assert sc.grid_cells("36") == list(range(36)) and len(sc.grid_cells("252")) == 252
+    assert sc.grid_cells("12") == sc.core_cells()
+    assert sc.grid_cells("36", spec="0-2,9") == [0, 1, 2, 9]
+    for grid, spec in (("35", None), ("12", "0"), ("36", "x")):
+        with pytest.raises(ConfigError):
+            sc.grid_cells(grid, spec=spec)
+    assert sc.resolve_scene("7").meta.cell == 7
+    robust = sc.robust_scene(40).to_json()
+    assert sc.resolve_scene("robust:40").to_json() == sc.cell_scene("252", 40).to_json() == robust
+    path = sc.grid_scene(3).save(tmp_path / "s.json")
+    assert sc.resolve_scene(str(path)).to_json() == sc.grid_scene(3).to_json()
+    with pytest.raises(PlanningError, match="not a scene file"):
+        sc.resolve_scene("cell seven")

@@ -1,11 +1,13 @@
 import math
 
 import numpy as np
+import pytest
 import torch
 
 from parknss import signals
 from parknss.vehicle import (
     VehicleGeometry,
+    arc_step,
     min_turning_radius,
     road_wheel_angle,
     steering_ratio_at,
@@ -52,3 +54,37 @@ def test_unit_conversions_roundtrip():
         signals.convert_to_schema(np.array([0.1]), "MPa", "brake_pressure"), [1.0]
     )
     assert signals.moving_mask(np.array([0.1, 0.2, -0.5])).tolist() == [False, True, True]
+
+
+def _circle(x0, y0, h0, kappa, s):
+    """The analytic pose after arc length s on a circle of curvature kappa (!= 0)."""
+    r = 1.0 / kappa
+    h = h0 + kappa * s
+    return x0 + r * (np.sin(h) - np.sin(h0)), y0 - r * (np.cos(h) - np.cos(h0)), h
+
+
+def test_arc_step_is_the_analytic_circle_and_line():
+    rng = np.random.default_rng(0)
+    x0, y0, h0 = rng.uniform(-5, 5, 200), rng.uniform(-5, 5, 200), rng.uniform(-4, 4, 200)
+    kappa = rng.uniform(-0.25, 0.25, 200)
+    s = rng.uniform(-6, 6, 200)  # signed: reverse included, up to 1.5 rad of turn
+    got = np.array(arc_step(x0, y0, h0, s, kappa * s))
+    want = np.array(_circle(x0, y0, h0, kappa, s))
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    for i in range(20):  # the scalar (math) path is the same formula
+        one = arc_step(
+            float(x0[i]), float(y0[i]), float(h0[i]), float(s[i]), float(kappa[i] * s[i])
+        )
+        assert all(isinstance(v, float) for v in one)
+        np.testing.assert_allclose(one, got[:, i], atol=1e-14)
+    # straight (kappa = 0) in both paths, and turning on the spot (ds = 0)
+    assert arc_step(1.0, 2.0, math.pi / 2, -0.5, 0.0) == pytest.approx((1.0, 1.5, math.pi / 2))
+    np.testing.assert_allclose(
+        np.array(arc_step(x0, y0, h0, s, 0.0 * s))[:2],
+        [x0 + s * np.cos(h0), y0 + s * np.sin(h0)],
+        atol=1e-12,
+    )
+    assert arc_step(1.0, 2.0, 0.3, 0.0, 0.4) == pytest.approx((1.0, 2.0, 0.7))
+    # a tiny turn is the line to first order (no 0/0)
+    x, y, h = arc_step(0.0, 0.0, 0.0, 1.0, 1e-14)
+    assert (x, h) == pytest.approx((1.0, 1e-14)) and y == pytest.approx(5e-15, abs=1e-20)

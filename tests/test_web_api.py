@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from parknss.cli import main
 from parknss.sim.scenarios import Scene, grid_scene
+from parknss.sim.session import simulate_scene
 from parknss.web.app import create_app
 from parknss.web.config import load_web_config
 from parknss.web.errors import BusyError
@@ -103,15 +103,16 @@ def test_an_edited_start_or_a_scene_file_is_planned_as_given(client):
     assert custom["length_m"] == by_index["length_m"]
 
 
-def test_simulate_equals_the_cli(client, tmp_path, capsys):
-    assert main(["simulate", "--scene", str(CELL), "--json", "--out", str(tmp_path)]) == 0
-    cli = json.loads(capsys.readouterr().out)
+def test_simulate_equals_the_cli(client):
+    """The browser's run is ``parknss simulate``'s: the same plan and the same outcome."""
+    cli = simulate_scene(str(CELL), ["kinematic"]).to_json()
     doc = client.post("/api/simulate", json={"index": CELL, "plant": "kinematic"}).json()
     out = doc["outcome"]
     assert out["completed"] and out["reason"] == "completed" and out["plant"] == "kinematic"
     for key in ("goal_error_cm", "heading_error_deg", "clearance_cm", "duration_s"):
         assert out[key] == pytest.approx(cli[key], rel=1e-9, abs=1e-9), key
-    assert doc["plan"]["cusps"] == cli["cusps"]
+    assert doc["plan"]["cusps"] == cli["cusps"] and doc["plan"]["refined"] == cli["refined"]
+    assert doc["plan"]["length_m"] == pytest.approx(cli["planned_length_m"], abs=1e-3)
     s = doc["series"]
     assert s["rate_hz"] == pytest.approx(25.0) and s["stride"] == 4
     assert len(s["t"]) == math.ceil(out["steps"] / 4) + ((out["steps"] - 1) % 4 != 0)

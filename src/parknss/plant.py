@@ -2,7 +2,10 @@
 
 A plant consumes the production command set {gear, torque_cmd, decel_cmd, steer_cmd} at
 100 Hz and returns what the car's bus would log. Pose is not part of a plant: the closed
-loop integrates (x, y, heading) of the rear axle from vx and yaw rate.
+loop integrates (x, y, heading) of the rear axle from vx and yaw rate. The closed loop
+drives every plant through this protocol (:mod:`parknss.sim.plants`); the ideal
+kinematic plant, which has no actuators, gets the speed it executes from its own command
+interface adapter, not through the Commands.
 """
 
 from __future__ import annotations

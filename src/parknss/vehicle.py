@@ -100,3 +100,44 @@ def min_turning_radius(geom: VehicleGeometry) -> float:
     """Rear-axle turning radius at the steering lock with the nonlinear rack, m (~4.6 m)."""
     delta = geom.steer_lock_deg / geom.steer_ratio_lock * math.pi / 180.0
     return geom.wheelbase / math.tan(delta)
+
+
+_SCALAR = (float, int)
+
+
+def arc_step(x, y, heading, ds, dheading):
+    """The exact pose step along a circular arc: the one source of this geometry.
+
+    From the rear-axle pose (x m, y m, heading rad), travel ``ds`` m (signed: negative in
+    reverse) along the arc that turns the heading by ``dheading`` rad, i.e. at constant
+    curvature kappa = dheading / ds (a straight line when dheading = 0). The position
+    moves along the chord, of length ds·sinc(dheading/2), in the direction
+    heading + dheading/2; the heading becomes heading + dheading (not wrapped). This is
+    the kinematic bicycle integrated exactly over a step of constant curvature (the
+    planner's arcs: dheading = kappa·ds) or of constant speed and yaw rate (the closed
+    loop: ds = vx·dt, dheading = ω·dt), and stays finite when kappa is unbounded
+    (ds = 0, dheading != 0: turning on the spot).
+
+    Python (or NumPy float64) scalars are computed with ``math``, for the 100 Hz loop and
+    the per-node search; otherwise NumPy broadcasts the arguments to one shape (N,) and
+    returns arrays of it. Both evaluate the same formula.
+
+    Returns:
+        (x, y, heading) after the step: floats, or arrays of the broadcast shape.
+    """
+    s = _SCALAR
+    if (
+        isinstance(ds, s)
+        and isinstance(dheading, s)
+        and isinstance(x, s)
+        and isinstance(y, s)
+        and isinstance(heading, s)
+    ):
+        half = 0.5 * dheading
+        chord = ds * (math.sin(half) / half if abs(half) > 1e-12 else 1.0 - half * half / 6.0)
+        ang = heading + half
+        return x + chord * math.cos(ang), y + chord * math.sin(ang), heading + dheading
+    dth = np.asarray(dheading, dtype=float)
+    chord = np.asarray(ds, dtype=float) * np.sinc(dth / (2.0 * math.pi))  # sin(πu)/(πu)
+    mid = heading + 0.5 * dth
+    return x + chord * np.cos(mid), y + chord * np.sin(mid), heading + dth

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
-
-ACTUATORS_YAML = CONFIG_DIR / "actuators.yaml"
+from parknss.config import StrictModel, load_config
 
 
 class ArchConfig(StrictModel):
@@ -125,7 +123,5 @@ class ActuatorConfig(StrictModel):
 
 
 def load_actuator_config(path=None, **overrides) -> ActuatorConfig:
-    """configs/actuators.yaml (or ``path``) plus overrides; defaults when neither exists."""
-    if path is None and ACTUATORS_YAML.is_file():
-        path = ACTUATORS_YAML
-    return load_config(ActuatorConfig, path, **overrides)
+    """``path`` (default: the shipped configs/actuators.yaml) plus per-section overrides."""
+    return load_config(ActuatorConfig, path, default="actuators.yaml", overrides=overrides)

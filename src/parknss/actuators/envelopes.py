@@ -16,9 +16,12 @@ are held at their floors (>= 0), the steering angle is rate-limited to just abov
 highest slew rate in the data (so the guard only acts on out-of-domain requests), then
 held within the lock ±400°.
 
-:class:`Envelope` holds the numbers (saved in the chain artefact); :class:`EnvelopeState`
-applies them one sample at a time (real time) and counts which envelope acted;
-:func:`clean_commands` and :func:`limit_outputs_torch` are the batched equivalents.
+:class:`Envelope` holds the numbers (saved in the chain artefact). The batched rules are
+written once: :func:`clean_commands` (input side, NumPy histories) and
+:func:`limit_outputs_torch` (output side, torch, a whole history or one sample, used by
+fitting, the chain's decoupled and interleaved rollouts alike). :class:`EnvelopeState` is
+their real-time twin, one sample per call in plain floats with activity counters; it is
+tested against both (tests/test_actuators_envelopes.py).
 """
 
 from __future__ import annotations
@@ -189,18 +192,43 @@ def clean_commands(env: Envelope, cmds: np.ndarray, steer0: np.ndarray | None = 
     return c
 
 
-def limit_outputs_torch(
-    env: Envelope, torque: Tensor, pressure: Tensor, steer: Tensor, steer0: Tensor
-) -> tuple[Tensor, Tensor, Tensor]:
-    """Output envelope over (B, T) submodel outputs; steer0 (B,) the angle before k = 0."""
-    torque = torch.clamp(torque, min=env.torque_floor)
-    pressure = torch.clamp(pressure, min=env.pressure_floor)
+ALL_MODELLED: tuple[bool, bool, bool] = (True, True, True)
+
+
+def _limit_steer(env: Envelope, steer: Tensor, prev: Tensor) -> Tensor:
+    """One sample of the steering envelope: rate limit around prev, then the lock; (B,)."""
     step = env.steer_rate_dps * DT
-    prev = steer0
-    outs = []
-    for k in range(steer.shape[1]):
-        s = torch.minimum(torch.maximum(steer[:, k], prev - step), prev + step)
-        s = torch.clamp(s, -env.steer_lock, env.steer_lock)
-        outs.append(s)
-        prev = s
-    return torque, pressure, torch.stack(outs, dim=1)
+    s = torch.minimum(torch.maximum(steer, prev - step), prev + step)
+    return torch.clamp(s, -env.steer_lock, env.steer_lock)
+
+
+def limit_outputs_torch(
+    env: Envelope,
+    torque: Tensor,
+    pressure: Tensor,
+    steer: Tensor,
+    steer_prev: Tensor,
+    modelled: tuple[bool, bool, bool] = ALL_MODELLED,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """The output envelope on submodel outputs, torch (differentiable where it is not active).
+
+    torque N·m, pressure bar, steer deg: each (B, T), a history whose steering angle before
+    k = 0 is steer_prev (B,), or each (B,), one sample whose previous angle is steer_prev.
+    Floors on torque and pressure, the steering rate limit then the lock, on the channels
+    ``modelled`` (drive, brake, steering) only: a measured channel passes as logged.
+    """
+    if modelled[0]:
+        torque = torch.clamp(torque, min=env.torque_floor)
+    if modelled[1]:
+        pressure = torch.clamp(pressure, min=env.pressure_floor)
+    if modelled[2]:
+        if steer.ndim == 1:
+            steer = _limit_steer(env, steer, steer_prev)
+        else:
+            outs = []
+            prev = steer_prev
+            for k in range(steer.shape[1]):
+                prev = _limit_steer(env, steer[:, k], prev)
+                outs.append(prev)
+            steer = torch.stack(outs, dim=1)
+    return torque, pressure, steer

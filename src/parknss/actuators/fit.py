@@ -19,16 +19,15 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
+from parknss.actuators.candidates import build_candidate
 from parknss.actuators.config import ActuatorConfig
 from parknss.actuators.data import ChannelData, channel_data, windows
 from parknss.actuators.envelopes import Envelope, limit_outputs_torch
-from parknss.actuators.models import ActuatorModel, Scaling, build_candidate, parameter_count
-from parknss.actuators.spec import CandidateSpec
+from parknss.actuators.models import ActuatorModel, Scaling, parameter_count
+from parknss.actuators.spec import CHANNEL_INDEX, CandidateSpec
 from parknss.data.trial import Trial
 from parknss.errors import ParknssError
 from parknss.signals import DT
-
-LINEAR_ARCHS = ("lag1", "lag2", "static")
 
 
 @dataclass
@@ -78,7 +77,7 @@ def fit_candidate(
     else:
         model = init
         model.requires_grad_(True)
-    linear = spec.arch in LINEAR_ARCHS
+    linear = model.fit_family == "linear"
     n_iter = iters if iters is not None else (
         cfg.fit.iters_linear if linear else cfg.fit.iters_neural)
     lr = cfg.fit.lr_linear if linear else cfg.fit.lr_neural
@@ -148,13 +147,9 @@ def replay(model: ActuatorModel, d: ChannelData, env: Envelope) -> list[np.ndarr
             ct, ft = torch.as_tensor(c)[None], torch.as_tensor(f)[None]
             y0 = torch.tensor([y[0]], dtype=torch.float64)
             p = model.rollout(ct, ft, y0)
-            z = torch.zeros_like(p)
-            if model.spec.channel == "drive":
-                p = limit_outputs_torch(env, p, z, z, y0)[0]
-            elif model.spec.channel == "brake":
-                p = limit_outputs_torch(env, z, p, z, y0)[1]
-            else:
-                p = limit_outputs_torch(env, z, z, p, y0)[2]
+            j = CHANNEL_INDEX[model.spec.channel]
+            modelled = tuple(i == j for i in range(3))
+            p = limit_outputs_torch(env, p, p, p, y0, modelled)[j]
             out.append(p[0].numpy())
     return out
 
@@ -162,7 +157,7 @@ def replay(model: ActuatorModel, d: ChannelData, env: Envelope) -> list[np.ndarr
 def step_response(model: ActuatorModel, env: Envelope, hold_s: float) -> StepMetrics:
     """Step from the rest command (0) to half the domain's far end (decel: its lower
     bound) after 2 s at rest, features at standstill in drive (vx = 0, ω = 0, gear = +1)."""
-    j = {"drive": 0, "brake": 1, "steering": 2}[model.spec.channel]
+    j = CHANNEL_INDEX[model.spec.channel]
     lo, hi = env.cmd_lo[j], env.cmd_hi[j]
     level = lo if model.spec.channel == "brake" else 0.5 * hi
     n0, n1 = round(2.0 / DT), round(hold_s / DT)

@@ -22,12 +22,16 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from parknss.actuators.models import ActuatorModel, tanh_mlp
+from parknss.actuators.models import ActuatorModel
 from parknss.actuators.scan import matrix_scan, scalar_scan
+from parknss.actuators.steppers import Lag1Stepper, Lag2Stepper, StaticStepper
+from parknss.nss.nets import tanh_mlp
 
 
 class _Affine(ActuatorModel):
     """The shared target t = k·c̃ + b + w·f̃."""
+
+    fit_family = "linear"
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg)
@@ -53,6 +57,8 @@ class _Affine(ActuatorModel):
 class Static(_Affine):
     """y = affine(command, features): no dynamics."""
 
+    stepper_cls = StaticStepper
+
     def rollout(self, cmd, feat, y0):
         c = self.sc_cmd(cmd)
         return self.unsc_y(self.target(c, self.features_or_empty(feat, c.shape)))
@@ -67,6 +73,8 @@ class Static(_Affine):
 
 class Lag1(_Affine):
     """First-order lag with one learnable time constant (see the module doc)."""
+
+    stepper_cls = Lag1Stepper
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg)
@@ -111,6 +119,8 @@ class Lag1(_Affine):
 class Hammerstein(Lag1):
     """Static 1x8x8x1 perceptron (plus the affine bypass), then the first-order lag."""
 
+    fit_family = "neural"  # its twin is Lag1Stepper with the perceptron
+
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg)
         self.psi = tanh_mlp(1 + self.n_feat, tuple(cfg.hammerstein_hidden)).double()
@@ -125,6 +135,8 @@ class Hammerstein(Lag1):
 
 class Lag2(_Affine):
     """Second-order lag (τ2, ζ, K), exact zero-order-hold discretisation."""
+
+    stepper_cls = Lag2Stepper
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg)

@@ -9,7 +9,12 @@ features) to the channel's actual, in physical units:
   -> (y (B,), state)``: the same recurrence one sample at a time (the chain's interleaved
   loop when submodels read NSS-predicted states);
 * ``stepper()``: a NumPy float64 real-time twin with a ring buffer
-  (:mod:`parknss.actuators.steppers`), equal to ``rollout`` to rounding.
+  (:mod:`parknss.actuators.steppers`; each class names its twin in ``stepper_cls``),
+  equal to ``rollout`` to rounding (tests/test_actuators_models.py).
+
+The architectures are implemented in :mod:`parknss.actuators.lags` and
+:mod:`parknss.actuators.neural`; :mod:`parknss.actuators.candidates` holds the one table
+from an architecture name to its class and builds candidates.
 
 Timing: y[k] may depend on cmd[0..k] and feat[0..k]. The lag family (lag1, lag2,
 hammerstein) starts from the measured actual y[0] = y0 and y[k] depends on inputs up to
@@ -22,6 +27,7 @@ trials (:class:`Scaling`), stored as buffers so the artefact carries them.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -29,6 +35,7 @@ from torch import Tensor, nn
 
 from parknss.actuators.config import ArchConfig
 from parknss.actuators.spec import CandidateSpec
+from parknss.actuators.steppers import Stepper
 from parknss.signals import DT
 
 
@@ -72,19 +79,16 @@ class Scaling:
         )
 
 
-def tanh_mlp(n_in: int, hidden: tuple[int, ...], n_out: int = 1) -> nn.Sequential:
-    """Linear-tanh per hidden width, then a linear head."""
-    mods: list[nn.Module] = []
-    w = n_in
-    for h in hidden:
-        mods += [nn.Linear(w, h), nn.Tanh()]
-        w = h
-    mods.append(nn.Linear(w, n_out))
-    return nn.Sequential(*mods)
-
-
 class ActuatorModel(nn.Module):
-    """Base class: the scaling buffers and the shared helpers (see the module doc)."""
+    """Base class: the scaling buffers and the shared helpers (see the module doc).
+
+    Class attributes: ``stepper_cls``, the NumPy real-time twin; ``fit_family``, which
+    optimiser budget of :class:`~parknss.actuators.config.FitConfig` fits it ("linear":
+    iters_linear/lr_linear, "neural": iters_neural/lr_neural).
+    """
+
+    stepper_cls: ClassVar[type[Stepper]]
+    fit_family: ClassVar[str] = "neural"
 
     def __init__(self, spec: CandidateSpec, scaling: Scaling, cfg: ArchConfig) -> None:
         super().__init__()
@@ -137,22 +141,9 @@ class ActuatorModel(nn.Module):
         items = [*self.named_parameters(), *self.named_buffers()]
         return {k: v.detach().to(torch.float64).numpy().copy() for k, v in items}
 
-    def stepper(self):
-        from parknss.actuators.steppers import make_stepper
-
-        return make_stepper(self)
-
-
-def build_candidate(spec: CandidateSpec, scaling: Scaling, cfg: ArchConfig) -> ActuatorModel:
-    """A fresh (float64) candidate of ``spec``; deterministic under the caller's torch seed."""
-    from parknss.actuators.lags import Hammerstein, Lag1, Lag2, Static
-    from parknss.actuators.neural import NARX, GRUModel, LSTMModel
-
-    table = {
-        "lag1": Lag1, "lag2": Lag2, "hammerstein": Hammerstein, "static": Static,
-        "narx": NARX, "narx1s": NARX, "gru": GRUModel, "lstm": LSTMModel,
-    }
-    return table[spec.arch](spec, scaling, cfg).to(torch.float64)
+    def stepper(self) -> Stepper:
+        """The NumPy float64 real-time twin of this candidate (weights copied now)."""
+        return self.stepper_cls(self)
 
 
 def parameter_count(model: nn.Module) -> int:

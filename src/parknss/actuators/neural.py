@@ -14,11 +14,15 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from parknss.actuators.models import ActuatorModel, tanh_mlp
+from parknss.actuators.models import ActuatorModel
+from parknss.actuators.steppers import GRUStepper, LSTMStepper, NARXStepper
+from parknss.nss.nets import tanh_mlp
 
 
 class NARX(ActuatorModel):
     """Static perceptron on a sliding command window (see the module doc)."""
+
+    stepper_cls = NARXStepper
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg)
@@ -95,6 +99,7 @@ class GRUModel(_Recurrent):
     """GRU with a 16-d hidden state and a linear readout."""
 
     cell_cls = nn.GRU
+    stepper_cls = GRUStepper
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg, cfg.gru_hidden)
@@ -117,6 +122,7 @@ class LSTMModel(_Recurrent):
     """LSTM with a 16-d hidden state and a linear readout (long-memory brake)."""
 
     cell_cls = nn.LSTM
+    stepper_cls = LSTMStepper
 
     def __init__(self, spec, scaling, cfg) -> None:
         super().__init__(spec, scaling, cfg, cfg.lstm_hidden)

@@ -83,17 +83,20 @@ class CandidateSpec:
         return cls(*parts)
 
 
+def feature_values(names: tuple[str, ...], vx, yaw_rate, gear) -> list:
+    """The state features ``names`` of vx (m/s), yaw rate (rad/s) and gear, each a float, a
+    NumPy array or a torch tensor alike ("speed" is |vx|): the one definition the fitting
+    (:func:`feature_matrix`), the chain's rollout and its real-time twin stack."""
+    vals = {"vx": vx, "yaw_rate": yaw_rate, "gear": gear}
+    return [abs(vx) if n == "speed" else vals[n] for n in names]
+
+
 def feature_matrix(names: tuple[str, ...], vx, yaw_rate, gear) -> np.ndarray:
     """State features (..., F) from vx (m/s), yaw rate (rad/s), gear arrays of shape (...)."""
-    cols = {
-        "speed": lambda: np.abs(vx),
-        "vx": lambda: vx,
-        "yaw_rate": lambda: yaw_rate,
-        "gear": lambda: gear,
-    }
     if not names:
         return np.zeros((*np.shape(vx), 0))
-    return np.stack([np.asarray(cols[n](), dtype=np.float64) for n in names], axis=-1)
+    cols = feature_values(names, np.asarray(vx), np.asarray(yaw_rate), np.asarray(gear))
+    return np.stack([np.asarray(c, dtype=np.float64) for c in cols], axis=-1)
 
 
 def trial_features(spec: CandidateSpec, tr: Trial) -> np.ndarray:

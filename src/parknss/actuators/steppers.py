@@ -1,11 +1,13 @@
 """NumPy float64 real-time twins of the candidates: one sample per call, ring buffers.
 
-``make_stepper(model)`` copies a fitted candidate's parameters into plain float64 arrays
-and returns an object with ``reset(c0, y0)`` (first command and measured actual, physical
-units) and ``step(c, f) -> y`` (command float, features (F,) array or None; returns the
-actual in physical units). The arithmetic is the candidate's ``step`` written in NumPy, so
-a whole-trial replay equals ``rollout`` to rounding (tests/test_actuators_models.py). No
-torch in the loop: a sample costs microseconds.
+``model.stepper()`` (each candidate class names its twin in ``stepper_cls``) copies a
+fitted candidate's parameters into plain float64 arrays and returns a :class:`Stepper`:
+``reset(c0, y0)`` (first command and measured actual, physical units) and
+``step(c, f) -> y`` (command float, features (F,) array or None; returns the actual in
+physical units). The arithmetic is the candidate's ``step`` written in NumPy (perceptrons
+through :func:`parknss.nss.nets.numpy_tanh_mlp`), so a whole-trial replay equals
+``rollout`` to rounding (tests/test_actuators_models.py, every architecture and variant).
+No torch in the loop: a sample costs microseconds.
 """
 
 from __future__ import annotations
@@ -14,21 +16,12 @@ import math
 
 import numpy as np
 
-
-def _mlp_layers(p: dict, prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:
-    idx = sorted({int(k.split(".")[1]) for k in p if k.startswith(prefix + ".")})
-    return [(p[f"{prefix}.{i}.weight"], p[f"{prefix}.{i}.bias"]) for i in idx]
+from parknss.nss.nets import numpy_layers, numpy_tanh_mlp
 
 
-def _mlp(layers, z: np.ndarray) -> float:
-    h = z
-    for W, b in layers[:-1]:
-        h = np.tanh(W @ h + b)
-    W, b = layers[-1]
-    return float((W @ h + b)[0])
+class Stepper:
+    """Base of the twins: the candidate's scalings as floats (subclasses add the dynamics)."""
 
-
-class _Base:
     def __init__(self, model) -> None:
         p = model.numpy_params()
         self.p = p
@@ -50,12 +43,20 @@ class _Base:
             return []
         return [(float(f[i]) - self._fo[i]) / self._fs[i] for i in range(self.n_feat)]
 
+    def reset(self, c0: float, y0: float) -> None:
+        """Start from the first command c0 and the measured actual y0 (physical units)."""
+        raise NotImplementedError
+
+    def step(self, c: float, f=None) -> float:
+        """One sample: command c, features f (F,) or None -> the actual (physical units)."""
+        raise NotImplementedError
+
 
 def _dot(a: list[float], b: list[float]) -> float:
     return math.fsum(x * y for x, y in zip(a, b, strict=True))
 
 
-class StaticStepper(_Base):
+class StaticStepper(Stepper):
     def __init__(self, model) -> None:
         super().__init__(model)
         self.k, self.b = float(self.p["k"]), float(self.p["b"])
@@ -79,7 +80,8 @@ class Lag1Stepper(StaticStepper):
     def __init__(self, model) -> None:
         super().__init__(model)
         self.log_tau, self.v = float(self.p["log_tau"]), self.p["v"].tolist()
-        self.psi = _mlp_layers(self.p, "psi") if "psi.0.weight" in self.p else None
+        psi = getattr(model, "psi", None)  # the Hammerstein perceptron
+        self.psi = numpy_layers(psi) if psi is not None else None
         self.y = 0.0
 
     def reset(self, c0: float, y0: float) -> None:
@@ -92,7 +94,7 @@ class Lag1Stepper(StaticStepper):
         a = math.exp(-self.dt * math.exp(-lt))
         u = self.target(cs, fs)
         if self.psi is not None:
-            u = u + _mlp(self.psi, np.array([cs, *fs]))
+            u = u + float(numpy_tanh_mlp(self.psi, np.array([cs, *fs]))[0])
         out = self.y * self.y_sc + self.y_off
         self.y = a * self.y + (1.0 - a) * u
         return out
@@ -119,13 +121,13 @@ class Lag2Stepper(StaticStepper):
         return out
 
 
-class NARXStepper(_Base):
+class NARXStepper(Stepper):
     """Ring buffer of the last n+1 scaled commands, kept twice so a window is one slice."""
 
     def __init__(self, model) -> None:
         super().__init__(model)
         self.n = model.lags + 1
-        self.net = _mlp_layers(self.p, "net")
+        self.net = numpy_layers(model.net)
         self.skip_w, self.skip_b = self.p["skip.weight"][0], float(self.p["skip.bias"][0])
         self.buf = np.zeros(2 * self.n)
         self.i = 0
@@ -140,7 +142,7 @@ class NARXStepper(_Base):
         self.i = (self.i + 1) % self.n
         win = self.buf[self.i : self.i + self.n]  # oldest .. newest
         z = np.concatenate([win, self.feats(f)]) if self.n_feat else win
-        y = _mlp(self.net, z) + float(self.skip_w @ z) + self.skip_b
+        y = float(numpy_tanh_mlp(self.net, z)[0]) + float(self.skip_w @ z) + self.skip_b
         return y * self.y_sc + self.y_off
 
 
@@ -148,7 +150,7 @@ def _sigmoid(x: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-x))
 
 
-class GRUStepper(_Base):
+class GRUStepper(Stepper):
     def __init__(self, model) -> None:
         super().__init__(model)
         p = self.p
@@ -191,15 +193,3 @@ class LSTMStepper(GRUStepper):
         self.c = fg * self.c + i * gg
         self.h = o * np.tanh(self.c)
         return (float(self.Wo @ self.h) + self.bo) * self.y_sc + self.y_off
-
-
-STEPPERS = {
-    "static": StaticStepper, "lag1": Lag1Stepper, "hammerstein": Lag1Stepper,
-    "lag2": Lag2Stepper, "narx": NARXStepper, "narx1s": NARXStepper,
-    "gru": GRUStepper, "lstm": LSTMStepper,
-}
-
-
-def make_stepper(model):
-    """The NumPy real-time twin of a candidate (see the module doc)."""
-    return STEPPERS[model.spec.arch](model)

@@ -1,4 +1,8 @@
-"""``parknss campaign``: generate, describe and import field-test campaigns."""
+"""``parknss campaign``: generate, describe and import field-test campaigns.
+
+``generate`` and ``import`` write the campaign folder atomically and refuse a folder that
+holds anything already unless ``--overwrite`` (:mod:`parknss.outputs`).
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,8 @@ import json
 from pathlib import Path
 
 import typer
+
+OVERWRITE_HELP = "Replace an existing campaign (or other content) at --out."
 
 
 def register(app: typer.Typer) -> None:
@@ -18,13 +24,16 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Folder to write the campaign to."),
         seed: int = typer.Option(0, "--seed", help="Seed of the repetition perturbations."),
         vehicle: Path | None = typer.Option(None, "--vehicle", help="Reference-vehicle YAML."),
+        overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     ) -> None:
         """Drive the synthetic reference vehicle through the paper's 16-trial campaign."""
         from parknss.data.io import write_campaign
+        from parknss.outputs import check_writable
         from parknss.reference.campaign import generate_campaign
 
+        check_writable(out, overwrite=overwrite, kind="campaign")
         campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle, progress=True)
-        write_campaign(campaign, out)
+        write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"wrote {len(campaign)} trials to {out}", err=True)
 
     @sub.command("describe")
@@ -47,12 +56,19 @@ def register(app: typer.Typer) -> None:
         src: Path = typer.Argument(..., help="Folder of logs, one file per trial."),
         out: Path = typer.Option(..., "--out", help="Campaign folder to write."),
         mapping: Path | None = typer.Option(None, "--mapping", help="Channel-mapping YAML."),
+        overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     ) -> None:
         """Turn a folder of real logs (.csv, .parquet, .mat, .mf4, .blf/.asc) into a campaign."""
         from parknss.data.io import import_folder, write_campaign
+        from parknss.errors import DataError
+        from parknss.outputs import check_writable
 
+        target, logs = out.resolve(), src.resolve()
+        if target == logs or target in logs.parents:
+            raise DataError(f"{out}: holds the logs being imported ({src}); choose another --out")
+        check_writable(out, overwrite=overwrite, kind="campaign")
         campaign = import_folder(src, mapping=mapping)
-        write_campaign(campaign, out)
+        write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"imported {len(campaign)} trials to {out}", err=True)
 
     app.add_typer(sub, name="campaign")

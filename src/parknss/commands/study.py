@@ -3,194 +3,23 @@
 ``parknss study learning-curve|seed-noise|ablations|limiter|convergence`` runs one study
 (``--quick``: the smoke-test budget of configs/experiments.yaml) through the executor
 (``--executor local|ray``, ``--workers``, ``--address``) with a result cache in
-``<out>/cache``, so an interrupted study resumes. It prints the study's tables (or one JSON
-document with ``--json``) and writes ``<name>.json`` and its figure to ``--out``.
-Studies that judge effects against the seed-noise floor take it from ``--floor``:
-``measure`` (run the seed-noise study, cached in the same folder), ``paper`` (the paper's
-CVs, labelled as such) or a seed-noise JSON written by ``parknss study seed-noise``.
-``parknss study estimate`` counts each study's fits and epochs and converts them to CPU
-hours with a measured paper-size seconds-per-epoch.
-
-Every study refuses, in one line, a campaign that lacks a channel NSS identification needs
-(:mod:`parknss.data.workflows`), and says in ``note`` when the campaign is not
-stratifiable and its folds are plain k-fold (:mod:`parknss.data.splits`).
+``<out>/cache`` (:func:`parknss.experiments.studies.run_study`); ``--floor`` names the
+seed-noise floor (``measure``, ``paper`` or a seed-noise JSON). ``parknss study estimate``
+counts each study's fits and epochs and converts them to CPU hours.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import typer
 
-STUDIES = ("learning-curve", "seed-noise", "ablations", "limiter", "convergence")
+from parknss.experiments.studies import STUDIES
 
 
 def _log(msg: str) -> None:
     typer.echo(f"[study] {msg}", err=True)
-
-
-def checked_campaign(data: Path | None, command: str):
-    """The study's campaign, refused (DataError, one line) if it lacks an NSS channel."""
-    from parknss.nss.campaigns import load_campaign
-
-    return load_campaign(data, "nss", command)
-
-
-def fold_note(name: str, campaign, cfg) -> tuple[bool, str]:
-    """(stratified, note) of the folds the study ``name`` fits on ``campaign``."""
-    if name == "learning-curve":
-        from parknss.experiments.learning_curve import grid_note
-
-        return grid_note(campaign, cfg.learning_curve_rs)
-    from parknss.data.splits import cv_plan
-
-    plan = cv_plan(campaign)
-    return plan.stratified, plan.note
-
-
-def _floor(spec: str, cfg, quick: bool, sweep):
-    from parknss.experiments.noise import NoiseFloor, seed_noise
-
-    if spec == "paper":
-        return NoiseFloor.paper(cfg)
-    if spec == "measure":
-        _log("measuring the seed-noise floor (cached in the same folder)")
-        return seed_noise(cfg, quick, sweep).floor
-    return NoiseFloor.load(spec)
-
-
-def run_study(
-    name: str,
-    quick: bool,
-    out: Path,
-    executor: str = "local",
-    workers: int | None = None,
-    address: str | None = None,
-    data: Path | None = None,
-    config: Path | None = None,
-    floor: str = "measure",
-    progress: bool = True,
-) -> dict:
-    """Run one study; write its JSON and figure to ``out``; the JSON document (with the
-    report tables under ``_tables``)."""
-    from parknss.errors import ConfigError
-    from parknss.experiments import findings as fnd
-    from parknss.experiments import study_tables as st
-    from parknss.experiments.config import load_experiments_config
-    from parknss.experiments.sweep import Sweep
-    from parknss.report import study_figures as fig
-
-    if name not in STUDIES:
-        raise ConfigError(f"unknown study {name!r}; one of {', '.join(STUDIES)}")
-    cfg = load_experiments_config(config)
-    stratified, note = fold_note(name, checked_campaign(data, f"parknss study {name}"), cfg)
-    if progress:
-        _log(note)
-    out.mkdir(parents=True, exist_ok=True)
-    sweep = Sweep(executor, workers, address, out / "cache", str(data) if data else None, progress)
-    t0 = time.perf_counter()
-    if name == "learning-curve":
-        from parknss.experiments.learning_curve import learning_curve
-
-        res = learning_curve(cfg, quick, sweep)
-        tables, found = st.learning_curve_tables(res), fnd.learning_curve_findings(res)
-        figure = fig.draw_learning_curve(res, out / "learning_curve.png")
-    elif name == "seed-noise":
-        from parknss.experiments.noise import seed_noise
-
-        res = seed_noise(cfg, quick, sweep)
-        tables, found = st.seed_noise_tables(res), fnd.seed_noise_findings(res)
-        figure = fig.draw_seed_noise(res, out / "seed_noise.png")
-    elif name == "ablations":
-        from parknss.experiments.ablations import ablations
-
-        res = ablations(cfg, quick, sweep, _floor(floor, cfg, quick, sweep))
-        tables, found = st.ablation_tables(res), fnd.ablation_findings(res)
-        figure = fig.draw_ablations(res, out / "table3_effects.png")
-    elif name == "limiter":
-        from parknss.experiments.limiter_study import limiter_study
-
-        res = limiter_study(cfg, quick, sweep, _floor(floor, cfg, quick, sweep))
-        tables, found = st.limiter_tables(res), fnd.limiter_findings(res)
-        figure = fig.draw_limiter(res, out / "limiter.png")
-    else:
-        from parknss.experiments.convergence import convergence
-        from parknss.report.nss_figures import draw_history
-
-        res = convergence(cfg, quick, sweep)
-        tables, found = st.convergence_tables(res), []
-        figure = draw_history(
-            res.epochs,
-            res.raw,
-            res.smooth,
-            out / "fig4_convergence.png",
-            res.output,
-            res.best_epoch,
-        )
-    doc = {
-        "study": name,
-        "quick": quick,
-        "executor": executor,
-        "wall_s": round(time.perf_counter() - t0, 2),
-        "result": res.to_json(),
-        "findings": [
-            {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
-        ],
-        "figure": str(figure),
-        "config": cfg.model_dump(mode="json"),
-        "stratified": stratified,
-        "note": note,
-    }
-    path = out / f"{name}.json"
-    path.write_text(json.dumps(doc, indent=2, default=str))
-    doc["json"] = str(path)
-    doc["_tables"] = tables
-    return doc
-
-
-def estimate(quick: bool, config: Path | None, data: Path | None, sec_per_epoch: float | None):
-    """Fits, epochs and CPU hours of every study at the budget (paper-size CPU s/epoch,
-    measured by a 5-epoch fit unless given; Euler on the fused engine: the eager
-    integrator options of Table III cost several times more per epoch)."""
-    from parknss.experiments.ablations import n_fits
-    from parknss.experiments.config import load_experiments_config
-    from parknss.experiments.sweep import Sweep
-
-    cfg = load_experiments_config(config)
-    checked_campaign(data, "parknss study estimate")
-    b = cfg.budget(quick)
-    if sec_per_epoch is None:
-        from parknss.experiments.folds import fold_job
-
-        def cpu_of(epochs: int) -> float:
-            ov = {**b.overrides, "train": {**b.overrides.get("train", {}), "epochs": epochs}}
-            cpu0 = time.process_time()
-            fold_job("cv", 0, data=str(data) if data else None, overrides=ov)
-            return time.process_time() - cpu0
-
-        n = 6
-        _log(f"timing paper-size fits of 1 and {n} epochs (process CPU time) ...")
-        # CPU time, not wall (on a shared machine the wall clock measures the neighbours);
-        # the difference removes loading and the epoch-1 validation; n - 1 = 5 epochs add
-        # one validation, the val_every = 5 rate. A first fit warms up (imports, scripting).
-        cpu_of(1)
-        short = cpu_of(1)
-        sec_per_epoch = (cpu_of(n) - short) / (n - 1)
-    sweep = Sweep(data=str(data) if data else None, progress=False)
-    rows = [
-        ("seed-noise", len(b.seeds), b.epochs),
-        ("learning-curve", len(cfg.learning_curve_rs) * len(b.folds), b.epochs),
-        ("ablations", n_fits(cfg, quick, sweep), b.epochs),
-        ("limiter", len(b.folds), b.epochs),
-        ("convergence", 1, b.convergence_epochs),
-        ("table2 (nss + direct yaw)", 8, b.convergence_epochs),
-    ]
-    return sec_per_epoch, [
-        {"study": s, "fits": f, "epochs": e, "cpu_h": f * e * sec_per_epoch / 3600.0}
-        for s, f, e in rows
-    ]
 
 
 def register(app: typer.Typer) -> None:
@@ -199,46 +28,36 @@ def register(app: typer.Typer) -> None:
         no_args_is_help=True,
     )
     app.add_typer(study_app, name="study")
+    quick_opt = typer.Option(False, "--quick", help="Smoke-test budget.")
+    config_opt = typer.Option(None, "--config", help="Experiments YAML.")
+    data_opt = typer.Option(None, "--data", help="Campaign folder.")
+    json_opt = typer.Option(False, "--json", help="Print one JSON document.")
 
     def _make(name: str):
         def command(
-            quick: bool = typer.Option(False, "--quick", help="Smoke-test budget."),
+            quick: bool = quick_opt,
             executor: str = typer.Option("local", "--executor", help="local | ray"),
             address: str | None = typer.Option(None, "--address", help="Ray cluster address."),
             workers: int | None = typer.Option(None, "--workers", help="Parallel workers."),
-            data: Path | None = typer.Option(None, "--data", help="Campaign folder."),
+            data: Path | None = data_opt,
             out: Path | None = typer.Option(None, "--out", help="Output folder (and cache)."),
-            config: Path | None = typer.Option(None, "--config", help="Experiments YAML."),
+            config: Path | None = config_opt,
             floor: str = typer.Option(
                 "measure", "--floor", help="Noise floor: measure | paper | seed-noise JSON."
             ),
-            as_json: bool = typer.Option(False, "--json", help="Print one JSON document."),
+            as_json: bool = json_opt,
         ) -> None:
-            from parknss.experiments.study_tables import text_table
+            from parknss.experiments.studies import StudyInputs, run_study, study_text
 
             folder = out or Path("runs") / f"study-{name}{'-quick' if quick else ''}"
-            doc = run_study(
-                name,
-                quick,
-                folder,
-                executor,
-                workers,
-                address,
-                data,
-                config,
-                floor,
-            )
-            tables = doc.pop("_tables")
+            inputs = StudyInputs(name=name, out=folder, quick=quick, executor=executor,
+                                 workers=workers, address=address, data=data, config=config,
+                                 floor=floor)
+            run = run_study(inputs, _log)
             if as_json:
-                typer.echo(json.dumps(doc, indent=2, default=str))
-                return
-            if not doc["stratified"]:
-                typer.echo(doc["note"] + "\n")
-            for t in tables:
-                typer.echo(text_table(t) + "\n")
-            for f in doc["findings"]:
-                typer.echo(f"[{f['verdict']}] {f['claim']}\n    measured: {f['measured']}")
-            typer.echo(f"wall {doc['wall_s']} s; wrote {doc['json']}, {doc['figure']}")
+                typer.echo(json.dumps(run.doc, indent=2, default=str))
+            else:
+                typer.echo(study_text(run))
 
         command.__doc__ = f"Run the {name} study; print its table, write its figure and JSON."
         return command
@@ -248,20 +67,17 @@ def register(app: typer.Typer) -> None:
 
     @study_app.command("estimate")
     def estimate_cmd(
-        quick: bool = typer.Option(False, "--quick", help="Smoke-test budget."),
-        config: Path | None = typer.Option(None, "--config", help="Experiments YAML."),
-        data: Path | None = typer.Option(None, "--data", help="Campaign folder."),
+        quick: bool = quick_opt, config: Path | None = config_opt, data: Path | None = data_opt,
         sec_per_epoch: float | None = typer.Option(
             None, "--sec-per-epoch", help="Skip the timing fit; use this s/epoch."
         ),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON document."),
+        as_json: bool = json_opt,
     ) -> None:
         """Fits and CPU hours of each study at the budget (one core per fit)."""
-        spe, rows = estimate(quick, config, data, sec_per_epoch)
+        from parknss.experiments.studies import estimate, estimate_text
+
+        spe, rows = estimate(quick, config, data, sec_per_epoch, _log)
         if as_json:
             typer.echo(json.dumps({"sec_per_epoch": spe, "studies": rows}, indent=2))
-            return
-        typer.echo(f"{'study':<28}{'fits':>6}{'epochs':>8}{'CPU h':>9}   ({spe:.2f} s/epoch)")
-        for r in rows:
-            typer.echo(f"{r['study']:<28}{r['fits']:>6}{r['epochs']:>8}{r['cpu_h']:>9.1f}")
-        typer.echo(f"{'total':<28}{'':>14}{sum(r['cpu_h'] for r in rows):>9.1f}")
+        else:
+            typer.echo(estimate_text(spe, rows))

@@ -48,6 +48,7 @@ from parknss.data.trial import UNLABELLED, Campaign, Trial
 from parknss.data.validate import TrialDataError, load_validation_config, validate_trial
 from parknss.data.workflows import campaign_channels
 from parknss.errors import DataError, one_line
+from parknss.outputs import artefact_folder
 from parknss.signals import (
     CHANNEL_BY_NAME,
     REQUIRED_CHANNELS,
@@ -621,11 +622,16 @@ class CampaignIndex(StrictModel):
     trials: list[TrialEntry]
 
 
-def write_campaign(campaign: Campaign, out_dir: str | Path) -> Path:
+def write_campaign(campaign: Campaign, out_dir: str | Path, *, overwrite: bool = False) -> Path:
     """Validate every trial, then write ``<id>.parquet`` per trial and campaign.json.
 
+    The folder is written atomically (:func:`parknss.outputs.artefact_folder`): a failure
+    leaves an earlier ``out_dir`` whole, and an ``out_dir`` that holds anything already is
+    refused unless ``overwrite`` (then it is replaced as a whole, never merged into).
+
     Returns the folder. Raises DataError for invalid trials, duplicate or unsafe ids, or
-    metadata that is not JSON.
+    metadata that is not JSON; OutputExistsError for an existing ``out_dir`` without
+    ``overwrite``.
     """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
@@ -654,20 +660,20 @@ def write_campaign(campaign: Campaign, out_dir: str | Path) -> Path:
         raise DataError(
             f"{out}: campaign meta is not JSON-serializable ({one_line(exc)})"
         ) from exc
-    out.mkdir(parents=True, exist_ok=True)
-    entries = []
-    for tr in trials:
-        write_trial_parquet(tr, out / f"{tr.id}.parquet")
-        entries.append({**_trial_meta(tr), "file": f"{tr.id}.parquet", "n_samples": tr.n})
-        del entries[-1]["schema_version"]
-    index = {
-        "format": CAMPAIGN_FORMAT,
-        "schema_version": SCHEMA_VERSION,
-        "name": campaign.name,
-        "meta": meta_json,
-        "trials": entries,
-    }
-    _atomic_write(out / CAMPAIGN_JSON, lambda tmp: tmp.write_text(json.dumps(index, indent=2)))
+    with artefact_folder(out, overwrite=overwrite, kind="campaign") as tmp:
+        entries = []
+        for tr in trials:
+            write_trial_parquet(tr, tmp / f"{tr.id}.parquet")
+            entries.append({**_trial_meta(tr), "file": f"{tr.id}.parquet", "n_samples": tr.n})
+            del entries[-1]["schema_version"]
+        index = {
+            "format": CAMPAIGN_FORMAT,
+            "schema_version": SCHEMA_VERSION,
+            "name": campaign.name,
+            "meta": meta_json,
+            "trials": entries,
+        }
+        (tmp / CAMPAIGN_JSON).write_text(json.dumps(index, indent=2))
     return out
 
 

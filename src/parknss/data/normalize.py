@@ -27,14 +27,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from parknss.data.trial import Trial
 from parknss.errors import CheckpointError, DataError
 
-NormalizerKind = Literal["clipped", "minmax", "zscore"]
 KINDS: tuple[str, ...] = ("clipped", "minmax", "zscore")
 CATEGORICAL: tuple[str, ...] = ("gear",)
 FORMAT = "parknss-normalizer/1"

@@ -12,10 +12,9 @@ from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
-import yaml
 from pydantic import Field, ValidationError, field_validator
 
-from parknss.config import CONFIG_DIR, StrictModel
+from parknss.config import CONFIG_DIR, StrictModel, read_yaml_mapping, shipped_config
 from parknss.data.trial import Trial
 from parknss.errors import ConfigError, DataError
 from parknss.signals import (
@@ -25,7 +24,8 @@ from parknss.signals import (
     SAMPLE_RATE_HZ,
 )
 
-DATA_CONFIG_YAML = CONFIG_DIR / "data.yaml"
+DATA_CONFIG_NAME = "data.yaml"
+DATA_CONFIG_YAML = CONFIG_DIR / DATA_CONFIG_NAME
 GEAR_VALUES: tuple[float, ...] = (-1.0, 0.0, 1.0)
 
 M = TypeVar("M", bound=StrictModel)
@@ -69,19 +69,12 @@ class ValidationConfig(StrictModel):
 def load_data_section(cls: type[M], section: str, path: str | Path | None = None) -> M:
     """Read section ``section`` of the data config YAML (default configs/data.yaml) as cls.
 
-    A missing default file gives the defaults; a missing explicit file, bad YAML, unknown
-    keys or wrong types give a one-line ConfigError.
+    A missing file (the shipped one included), bad YAML, unknown keys or wrong types give
+    a one-line ConfigError.
     """
-    p = Path(path) if path is not None else DATA_CONFIG_YAML
-    if path is None and not p.is_file():
-        return cls()
-    if not p.is_file():
-        raise ConfigError(f"{p}: config file not found")
-    try:
-        doc = yaml.safe_load(p.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
-    if not isinstance(doc, dict) or not set(doc) <= {"validation", "describe"}:
+    p = Path(path) if path is not None else shipped_config(DATA_CONFIG_NAME)
+    doc = read_yaml_mapping(p)
+    if not set(doc) <= {"validation", "describe"}:
         raise ConfigError(f"{p}: expected a mapping with sections 'validation' and 'describe'")
     try:
         return cls.model_validate(doc.get(section) or {})

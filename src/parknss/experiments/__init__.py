@@ -1,1 +1,3 @@
-"""Studies of the paper's evaluation methodology and the executor that runs them."""
+"""The paper's evaluation studies, ``parknss reproduce``, and the application runs that draw
+figures and write files (Table II, the deployment fit, evaluate, rate, the actuator study,
+the demo); sweeps run through the one executor, :mod:`parknss.executor`."""

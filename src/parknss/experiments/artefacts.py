@@ -1,16 +1,32 @@
-"""The registered artefacts of ``parknss reproduce``: one function per paper table/figure.
+"""The artefacts of ``parknss reproduce``: one function per paper table/figure.
 
 Each function is small: it calls the study or evaluation code that does the work and turns
 its typed result into report tables, figures and findings. The NSS studies share the run's
 executor settings and result cache (:meth:`RunContext.sweep`), so the seed-noise fits run
 once per run folder and every other study compares its effects against that floor.
-Artefacts of parts owned elsewhere (Table II / Fig. 5, Fig. 7, Table V / Figs. 8-9,
-Table IV / Figs. 3 and 6) are thin wrappers over those parts' public functions.
+Artefacts of other parts (Table II / Fig. 5, Fig. 7, Table V / Figs. 8-9, Table IV) are
+thin wrappers over those parts' library functions. :data:`ARTEFACTS` lists them in
+registration order (:mod:`parknss.experiments.registry` looks them up by name).
 """
 
 from __future__ import annotations
 
-from parknss.experiments.registry import ArtefactResult, RunContext, Table, register
+from collections.abc import Callable
+
+from parknss.experiments.results import Artefact, ArtefactResult, RunContext, Table
+
+ARTEFACTS: list[Artefact] = []
+"""Every artefact, in registration (report) order."""
+
+
+def register(name: str, title: str, paper_ref: str):
+    """Decorator adding an artefact function to :data:`ARTEFACTS` under ``name``."""
+
+    def deco(fn: Callable[[RunContext], ArtefactResult]):
+        ARTEFACTS.append(Artefact(name, title, paper_ref, fn))
+        return fn
+
+    return deco
 
 
 @register("campaign", "Field-test campaign summary (synthetic)", "§IV-A")
@@ -186,8 +202,9 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
 
 @register("fig7", "Fig. 7: ISO/TS 18571 ratings", "§V-F, Fig. 7")
 def fig7_artefact(ctx: RunContext) -> ArtefactResult:
-    from parknss.commands.rate import run_rate
+    from parknss.chain.rating import RateInputs
     from parknss.config import SHIPPED_NSS
+    from parknss.experiments.rating import run_rate
 
     data = ctx.data or _campaign_dir(ctx)
     tables, figs, notes = [], [], []
@@ -198,8 +215,7 @@ def fig7_artefact(ctx: RunContext) -> ArtefactResult:
         notes.append(f"no shipped NSS model at {SHIPPED_NSS}: only the truth replay is rated")
     for label, model, replay in runs:
         sub = ctx.out_dir / ("fig7_truth" if replay else "fig7_model")
-        doc = run_rate(data, model, replay, sub)
-        tab = doc.pop("_table")
+        tab = run_rate(RateInputs(data=data, model=model, replay_truth=replay), sub).table
         s = tab.summary()
         rows = [[c.channel, c.conditioning, c.n_trials, c.overall, c.grade] for c in s.channels]
         rows.append(["mean", "raw / filtered", "", f"{s.mean_raw:.3f} / {s.mean_filtered:.3f}", ""])
@@ -220,28 +236,30 @@ def _campaign_dir(ctx: RunContext):
 
     path = ctx.out_dir / "campaign"
     if not (path / "campaign.json").is_file():
-        write_campaign(ctx.campaign(), path)
+        write_campaign(ctx.campaign(), path, overwrite=True)  # no campaign.json: partial
     return path
 
 
 @register("table5", "Table V and Figs. 8-9: closed loop", "§V-G, Table V, Figs. 8-9")
 def table5_artefact(ctx: RunContext) -> ArtefactResult:
-    from parknss.commands.simulate import grid_report, run_grid, simulate_scene
     from parknss.errors import ParknssError
+    from parknss.report.sim_figures import draw_scene_run
     from parknss.sim.closed_loop import load_closed_loop_config
-    from parknss.sim.plants import make_plant
+    from parknss.sim.grid import grid_report, run_grid
     from parknss.sim.scenarios import N_CELLS
+    from parknss.sim.session import check_plants, simulate_scene
 
     b = ctx.experiments_config().budget(ctx.quick)
-    cfg = load_closed_loop_config(None)
+    cfg = load_closed_loop_config()
     plants, notes = ["kinematic", "reference"], []
     try:
-        make_plant("chain", vehicle_yaml=cfg.reference_vehicle, chain_path=cfg.chain_path)
+        check_plants(["chain"], cfg)
         plants.insert(1, "chain")
     except ParknssError as exc:
         notes.append(f"chain plant not run: {exc}")
     cells = list(b.sim_cells) if b.sim_cells is not None else list(range(N_CELLS))
-    rows = run_grid("36", plants, cells, ctx.workers or 1, progress=ctx.progress)
+    rows = run_grid("36", plants, cells, ctx.workers or 1, executor=ctx.executor,
+                    address=ctx.address, progress=ctx.progress)
     doc = grid_report(rows, plants, "36", cfg.clearance_floor_cm)
     keys = [
         ("completed", "completed"),
@@ -261,8 +279,7 @@ def table5_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *plants],
         [[label, *(doc["summary"][p][k] for p in plants)] for k, label in keys],
     )
-    scene = simulate_scene(str(b.sim_scene), plants, ctx.out_dir)
-    figs = list((scene.get("figures") or {}).values())
+    figs = list(draw_scene_run(simulate_scene(str(b.sim_scene), plants), ctx.out_dir).values())
     if not figs:
         notes.append(f"scene {b.sim_scene} is not plannable: no Figs. 8/9")
     return ArtefactResult([table], figs, notes="; ".join(notes))
@@ -286,11 +303,14 @@ def table4_artefact(ctx: RunContext) -> ArtefactResult:
         doc = json.loads(meta_path.read_text())["build"]
         source = f"rows recorded by `parknss actuators build` in {meta_path}"
     else:
-        from parknss.commands.actuators import run_build
+        from parknss.actuators.phase_a import Fanout
+        from parknss.chain.build import BuildInputs, run_build
 
-        doc = run_build(SHIPPED_NSS, ctx.data, None, None, None, monolithic=True)
+        fanout = Fanout(ctx.executor, ctx.workers or 1, ctx.address)
+        doc = run_build(BuildInputs(nss=SHIPPED_NSS, data=ctx.data, monolithic=True,
+                                         fanout=fanout))
         source = "measured now by `parknss actuators ladder` on the shipped NSS"
-    from parknss.commands.actuators import LADDER_ROWS
+    from parknss.chain.ladder import LADDER_ROWS
 
     rows = [
         [name, doc["rows"][key]["vx_full"], doc["rows"][key]["vx_moving"]]

@@ -13,9 +13,7 @@ from typing import Any, Literal
 
 from pydantic import Field, field_validator
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
-
-DEFAULT_YAML = CONFIG_DIR / "experiments.yaml"
+from parknss.config import StrictModel, load_config
 
 Overrides = dict[str, dict[str, Any]]
 
@@ -124,10 +122,8 @@ class ExperimentsConfig(StrictModel):
 
 
 def load_experiments_config(path: str | Path | None = None) -> ExperimentsConfig:
-    """The studies' config: ``path``, else configs/experiments.yaml, else the defaults."""
-    if path is None and DEFAULT_YAML.is_file():
-        path = DEFAULT_YAML
-    return load_config(ExperimentsConfig, path)
+    """The studies' config: ``path``, else the shipped configs/experiments.yaml."""
+    return load_config(ExperimentsConfig, path, default="experiments.yaml")
 
 
 def merge_overrides(*layers: Overrides | None) -> Overrides:

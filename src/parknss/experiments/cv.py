@@ -20,14 +20,23 @@ folds, classes of different sizes) is split by plain k-fold instead
 
 from __future__ import annotations
 
+import json
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from parknss.data.splits import DEFAULT_FOLDS, FoldPlan
-from parknss.experiments.executor import Job, run_jobs
+from parknss.data.splits import DEFAULT_FOLDS, FoldPlan, cv_plan
+from parknss.errors import ConfigError
+from parknss.executor import Job, run_jobs
+from parknss.experiments.config import merge_overrides
+from parknss.nss.campaigns import load_campaign
+from parknss.nss.checkpoint import load_model
+from parknss.nss.predict import predict_trials
+from parknss.report.nss_figures import draw_history, draw_rollouts, pick_maneuvers
 
 MODEL_VARIANTS: dict[str, tuple[str, dict]] = {
     "nss": ("nss", {}),
@@ -40,14 +49,6 @@ COLUMNS: tuple[tuple[str, str], ...] = (
     ("yaw_mse_moving_degs2", "ω_z [(°/s)²]"),
 )
 FOLDS = DEFAULT_FOLDS
-
-
-def merge(base: dict, extra: dict) -> dict:
-    """Section-wise merge of two override dicts ({section: {field: value}})."""
-    out = {k: dict(v) for k, v in base.items()}
-    for sec, vals in extra.items():
-        out[sec] = {**out.get(sec, {}), **vals}
-    return out
 
 
 def mean_std(values: list[float]) -> tuple[float, float]:
@@ -147,7 +148,7 @@ def cv_jobs(
                 "model": model,
                 "data": data,
                 "config": config,
-                "overrides": merge(overrides, extra) if model == "nss" else {},
+                "overrides": merge_overrides(overrides, extra) if model == "nss" else {},
             }
             if save_dir is not None and model == "nss":
                 kw["save_dir"] = str(save_dir / f"{var}_fold{i}")
@@ -173,13 +174,9 @@ def run_cv(
     ``plan``: the campaign's CV fold plan, for the result's ``stratified`` and ``note``
     (computed from the campaign when not given; the fold jobs build the same folds).
     """
-    import time
-
     variants = list(variants or MODEL_VARIANTS)
     for v in variants:
         if v not in MODEL_VARIANTS:
-            from parknss.errors import ConfigError
-
             raise ConfigError(f"unknown CV variant {v!r}; one of {', '.join(MODEL_VARIANTS)}")
     overrides = overrides or {}
     t0 = time.perf_counter()
@@ -197,8 +194,75 @@ def run_cv(
     for (var, _), res in zip(pairs, results, strict=True):
         folds[var].append(res)
     if plan is None:
-        from parknss.data.splits import cv_plan
-        from parknss.nss.campaigns import load_campaign
-
         plan = cv_plan(load_campaign(data))
     return CVResult(folds, overrides, time.perf_counter() - t0, plan.stratified, plan.note)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CVInputs:
+    """``parknss cv``: campaign folder ``data`` (None: default), NSS YAML ``config`` (None:
+    shipped), NSS ``overrides``, the model ``variants``, the executor settings and the run
+    folder ``out`` (cv.json, table2.txt, figures; fold cache in out/cache, models in
+    out/models)."""
+
+    out: Path
+    data: Path | None = None
+    config: Path | None = None
+    overrides: dict = field(default_factory=dict)
+    variants: tuple[str, ...] = tuple(MODEL_VARIANTS)
+    executor: str = "local"
+    workers: int | None = None
+    address: str | None = None
+
+
+def cv_figures(res: CVResult, campaign, out: Path) -> list[str]:
+    """Fig. 4 and Fig. 5 from the NSS fold 0 (if its model was saved)."""
+    figs = []
+    f0 = (res.folds.get("nss") or [None])[0]
+    if not f0:
+        return figs
+    h = f0.get("history") or {}
+    if h.get("epochs"):
+        figs.append(str(draw_history(h["epochs"], h["raw"], h["smooth"],
+                                     out / "fig4_convergence.png", output=h.get("output"),
+                                     best_epoch=f0.get("best_epoch"))))
+    if f0.get("model_dir"):
+        model = load_model(f0["model_dir"]).model
+        trials = pick_maneuvers([campaign[i] for i in f0["val"]])
+        pred = predict_trials(model, trials)
+        figs.append(str(draw_rollouts(trials, pred, out / "fig5_rollouts.png",
+                                      f0.get("window_length"))))
+    return figs
+
+
+def _quiet(msg: str) -> None:
+    pass
+
+
+def table2(inputs: CVInputs, log: Callable[[str], None] = _quiet) -> tuple[CVResult, dict]:
+    """Table II as ``parknss cv`` runs it: the campaign checked for the NSS channels
+    before any job starts, the CV of every variant, Figs. 4 and 5, cv.json and table2.txt
+    in ``out``; (result, its JSON document with the figure paths)."""
+    campaign = load_campaign(inputs.data, "nss", "parknss cv")
+    plan = cv_plan(campaign)  # stratified, or plain k-fold (says why in plan.note)
+    log(plan.note)
+    out = inputs.out
+    out.mkdir(parents=True, exist_ok=True)
+    res = run_cv(
+        data=str(inputs.data) if inputs.data else None,
+        config=str(inputs.config) if inputs.config else None,
+        overrides=inputs.overrides,
+        variants=list(inputs.variants),
+        executor=inputs.executor,
+        workers=inputs.workers,
+        address=inputs.address,
+        cache_dir=out / "cache",
+        save_dir=out / "models",
+        plan=plan,
+    )
+    doc = res.to_json()
+    doc["figures"] = cv_figures(res, campaign, out)
+    (out / "cv.json").write_text(json.dumps(doc, indent=2))
+    (out / "table2.txt").write_text(res.table() + "\n")
+    log(f"wrote {out / 'cv.json'}, {out / 'table2.txt'} and {len(doc['figures'])} figures")
+    return res, doc

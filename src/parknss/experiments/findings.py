@@ -15,7 +15,7 @@ from parknss.experiments.ablations import AblationResult
 from parknss.experiments.learning_curve import LearningCurveResult
 from parknss.experiments.limiter_study import LimiterResult
 from parknss.experiments.noise import SeedNoiseResult
-from parknss.experiments.registry import Finding
+from parknss.experiments.results import Finding
 from parknss.experiments.sweep import relative_effect
 
 

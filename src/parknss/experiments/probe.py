@@ -2,7 +2,8 @@
 
 ``probe_fit`` fits a least-squares line to seeded noisy samples with torch and returns the
 coefficients: a miniature of the real sweeps (seeded, torch, JSON result), cheap enough to
-run on every worker of a cluster. ``parknss executor-check`` compares executors with it.
+run on every worker of a cluster. tests/test_executor.py runs it in-process, on the local
+pool and on Ray (:mod:`parknss.executor`) and compares the results.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ from parknss.experiments.convergence import ConvergenceResult
 from parknss.experiments.learning_curve import LearningCurveResult
 from parknss.experiments.limiter_study import LimiterResult
 from parknss.experiments.noise import SeedNoiseResult
-from parknss.experiments.registry import Table
+from parknss.experiments.results import Table
 
 
 def _r(x: float, digits: int = 4) -> float | str:

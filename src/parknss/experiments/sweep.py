@@ -17,8 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from parknss.config import override
+from parknss.executor import Job, run_jobs
 from parknss.experiments.config import Overrides
-from parknss.experiments.executor import Job, run_jobs
+from parknss.nss.config import NSSConfig
 
 FOLD_JOB = "parknss.experiments.folds:fold_job"
 
@@ -64,10 +66,8 @@ def canonical_overrides(overrides: Overrides) -> Overrides:
     Two spellings of one configuration (e.g. ``{"model": {"residual_yaw": True}}`` and
     ``{}``) give the same job, so the executor's cache computes it once.
     """
-    from parknss.nss.config import NSSConfig, with_overrides
-
     default = NSSConfig().model_dump(mode="json")
-    doc = with_overrides(NSSConfig(), **overrides).model_dump(mode="json")
+    doc = override(NSSConfig(), overrides).model_dump(mode="json")
     out: Overrides = {}
     for sec, vals in doc.items():
         diff = {k: v for k, v in vals.items() if v != default[sec][k]}

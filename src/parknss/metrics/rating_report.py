@@ -8,12 +8,15 @@ invariant, so channels are rated in their schema units without conversion.
 :class:`RatingTable` holds one row per (trial, channel, conditioning) and writes the CSV,
 the JSON document and the summary: the mean of each sub-rating per channel, and the
 mean overall rating over channels (the mean of the per-channel means), raw and filtered.
+:func:`truth_pairs` and :func:`model_pairs` pair a campaign's logged channels with its
+truth channels or with a model's predictions; which model or chain predicts is
+:mod:`parknss.chain.rating`.
 """
 
 from __future__ import annotations
 
 import csv
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -21,6 +24,7 @@ import numpy as np
 from pydantic import Field
 
 from parknss.config import StrictModel
+from parknss.data.trial import Trial
 from parknss.errors import DataError
 from parknss.metrics.iso18571 import ISORatingConfig, LowpassConfig, grade_of, lowpass, rate
 from parknss.signals import DT
@@ -234,3 +238,29 @@ def rate_campaign(
         if progress is not None:
             progress(f"rated {tid}")
     return RatingTable(rows, tuple(cfg.channels), cfg)
+
+
+def truth_pairs(campaign: Iterable[Trial], channels: Sequence[str]) -> dict:
+    """trial id -> channel -> (logged, truth_<channel>) of a synthetic campaign: the rating a
+    perfect model would get (the ceiling set by sensor noise and the blind zone)."""
+    return {tr.id: {ch: (tr[ch], tr.truth(ch)) for ch in channels} for tr in campaign}
+
+
+def model_pairs(
+    campaign: Iterable[Trial],
+    predictions: Mapping[str, Mapping[str, np.ndarray]],
+    channels: Sequence[str],
+    model: object,
+) -> dict:
+    """trial id -> channel -> (logged, predicted); one-line DataError naming ``model`` for a
+    trial or channel without a prediction."""
+    pairs = {}
+    for tr in campaign:
+        pred = predictions.get(tr.id)
+        if pred is None:
+            raise DataError(f"{model}: no prediction for trial {tr.id}")
+        missing = [ch for ch in channels if ch not in pred]
+        if missing:
+            raise DataError(f"{model}: trial {tr.id}: no prediction of {', '.join(missing)}")
+        pairs[tr.id] = {ch: (tr[ch], pred[ch]) for ch in channels}
+    return pairs

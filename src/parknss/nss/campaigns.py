@@ -41,7 +41,7 @@ def default_campaign(seed: int = 0) -> Campaign:
     print(f"generating the default synthetic campaign (seed {seed}) ...", file=sys.stderr)
     campaign = generate_campaign(seed=seed)
     with contextlib.suppress(OSError):  # a read-only checkout: use it from memory
-        write_campaign(campaign, path)
+        write_campaign(campaign, path, overwrite=True)  # a cache: replace a partial one
     return campaign
 
 

@@ -10,10 +10,8 @@ from typing import Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.config import StrictModel, load_config, override, parse_set
 from parknss.signals import BLIND_ZONE_KMH, DT
-
-DEFAULT_YAML = CONFIG_DIR / "nss.yaml"
 
 
 class ModelConfig(StrictModel):
@@ -119,13 +117,26 @@ class NSSConfig(StrictModel):
 
 
 def load_nss_config(path=None, **sections) -> NSSConfig:
-    """Read an NSSConfig from YAML (defaults when None) plus per-section overrides."""
-    return load_config(NSSConfig, path, **sections)
+    """Read an NSSConfig from ``path`` (default: the shipped configs/nss.yaml, the paper's
+    values) plus per-section overrides, e.g. ``train={"epochs": 30}``."""
+    return load_config(NSSConfig, path, default="nss.yaml", overrides=sections)
 
 
 def with_overrides(cfg: NSSConfig, **sections: dict) -> NSSConfig:
-    """A copy of ``cfg`` with fields of sections replaced, e.g. train={"epochs": 30}."""
-    doc = cfg.model_dump(mode="json")
-    for sec, vals in sections.items():
-        doc[sec] = {**doc[sec], **vals}
-    return NSSConfig.model_validate(doc)
+    """A copy of ``cfg`` with fields of sections replaced, e.g. train={"epochs": 30};
+    :func:`parknss.config.override` (validated, one-line ConfigError)."""
+    return override(cfg, sections)
+
+
+def cli_overrides(
+    sets: list[str] | None, epochs: int | None = None, seed: int | None = None
+) -> dict[str, dict]:
+    """The overrides of the NSS commands: ``--set section.field=value`` items
+    (:func:`parknss.config.parse_set`) plus ``--epochs`` and ``--seed`` (train section),
+    as {section: {field: value}}."""
+    out = parse_set(sets)
+    if epochs is not None:
+        out.setdefault("train", {})["epochs"] = epochs
+    if seed is not None:
+        out.setdefault("train", {})["seed"] = seed
+    return out

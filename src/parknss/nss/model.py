@@ -17,7 +17,11 @@ direct-yaw variant) the second state is the scaled yaw rate itself.
 
 :meth:`NSSModel.rollout` is the one rollout used by training, evaluation and the
 simulator; :meth:`NSSModel.step` advances one sample in real time and reproduces
-``rollout`` step by step. Midpoint and RK4 hold u constant over the step.
+``rollout`` step by step. Midpoint and RK4 hold u constant over the step. The Euler step
+(:meth:`NSSModel.integrate`, :meth:`NSSModel.step_function`) and the yaw readout
+(:meth:`NSSModel.reconstruct_yaw`) are written here once: the chain's interleaved rollout
+calls them, and the NumPy real-time twin (:class:`parknss.chain.realtime.NumpyNSS`) is
+tested against :meth:`NSSModel.step` (tests/test_chain.py).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from parknss.errors import DataError
 from parknss.nss.config import ModelConfig
 from parknss.nss.fused import FusedEulerRollout, euler_forward
 from parknss.nss.fused_mlp import FusedTanhMLP
+from parknss.nss.nets import linear_layers, tanh_mlp
 from parknss.signals import ACTUAL_CHANNELS, OUTPUT_CHANNELS, STATE_CHANNELS
 from parknss.vehicle import VehicleGeometry, yaw_rate_ref
 
@@ -44,17 +49,6 @@ I_GEAR, I_TORQUE, I_BRAKE, I_STEER = range(4)
 
 # A limiter maps (next scaled state (B, 2), scaled input of the step (B, 4)) -> state.
 StateLimiter = Callable[[Tensor, Tensor], Tensor]
-
-
-def mlp(n_in: int, units: int, layers: int, n_out: int) -> nn.Sequential:
-    """Linear-tanh x layers, then a linear head: n_in -> units ... -> n_out."""
-    mods: list[nn.Module] = []
-    width = n_in
-    for _ in range(layers):
-        mods += [nn.Linear(width, units), nn.Tanh()]
-        width = units
-    mods.append(nn.Linear(width, n_out))
-    return nn.Sequential(*mods)
 
 
 @dataclass
@@ -111,8 +105,8 @@ class NSSModel(nn.Module):
         self.normalizer = normalizer
         self.geometry = geometry or VehicleGeometry()
         self.dt = float(cfg.dt)
-        self.state_net = mlp(2 + len(INPUTS), cfg.state_units, cfg.state_layers, 2)
-        self.output_net = mlp(5, cfg.output_units, cfg.output_layers, 2)
+        self.state_net = tanh_mlp(2 + len(INPUTS), (cfg.state_units,) * cfg.state_layers, 2)
+        self.output_net = tanh_mlp(5, (cfg.output_units,) * cfg.output_layers, 2)
         self._refresh_scaling()
 
     def _refresh_scaling(self) -> None:
@@ -178,6 +172,28 @@ class NSSModel(nn.Module):
         """f_θ([x̂, u]): dx̂/dt in scaled units per second, (B, 2)."""
         return self.state_net(torch.cat([x_s, u_s], dim=-1))
 
+    def step_function(self) -> Callable[[Tensor, Tensor], Tensor]:
+        """:meth:`integrate` for per-sample loops: (x_s (B, 2), u_s (B, 4)) -> x_s (B, 2).
+
+        Forward Euler x̂ + dt·f([x̂, u_s]) with the state net's weights taken out of the
+        modules once: the same addmm/tanh sequence ``nn.Linear`` runs on 2-D inputs, without
+        the module-call overhead (the chain's interleaved rollout). Other integrators:
+        :meth:`integrate` itself. Snapshot of the weights: call again after they change.
+        """
+        if self.cfg.integrator != "euler":
+            return self.integrate
+        wts = [(m.bias, m.weight.t()) for m in linear_layers(self.state_net)]
+        dt = self.dt
+
+        def step(x_s: Tensor, u_s: Tensor) -> Tensor:
+            h = torch.cat([x_s, u_s], dim=-1)
+            for b, wt in wts[:-1]:
+                h = torch.tanh(torch.addmm(b, h, wt))
+            b, wt = wts[-1]
+            return x_s + dt * torch.addmm(b, h, wt)
+
+        return step
+
     def integrate(self, x_s: Tensor, u_s: Tensor) -> Tensor:
         """One step of the configured integrator, u held over the step; (B, 2)."""
         dt = self.dt
@@ -202,7 +218,7 @@ class NSSModel(nn.Module):
 
     def _fused(self, x0_s: Tensor, u_s: Tensor) -> Tensor:
         """Internal states (B, T, 2) by the fused Euler kernel (see parknss.nss.fused)."""
-        lin = [m for m in self.state_net if isinstance(m, nn.Linear)]
+        lin = linear_layers(self.state_net)
         U = u_s[:, :-1].transpose(0, 1).contiguous()
         hidden = [t for m in lin[1:-1] for t in (m.weight, m.bias)]
         args = (x0_s, U, lin[0].weight, lin[0].bias, lin[-1].weight, lin[-1].bias)
@@ -240,17 +256,24 @@ class NSSModel(nn.Module):
         """Output network g_φ on (..., 5) -> (..., 2); ``fused`` uses FusedTanhMLP."""
         if not (fused and torch.is_grad_enabled()):
             return self.output_net(g_in)
-        lin = [m for m in self.output_net if isinstance(m, nn.Linear)]
+        lin = linear_layers(self.output_net)
         params = [t for m in lin for t in (m.weight, m.bias)]
         flat = g_in.reshape(-1, g_in.shape[-1]).contiguous()
         return FusedTanhMLP.apply(flat, *params).view(*g_in.shape[:-1], -1)
 
+    def reconstruct_yaw(self, X_s: Tensor, steer_s: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """The yaw readout (eq. 5) at internal states X_s (..., 2) and scaled steering (...):
+        (ω_ref rad/s, ω_ref scaled, reconstructed ω̂_z scaled), each (...). With
+        ``residual_yaw=False`` the second state is the scaled yaw rate itself."""
+        ref = self.yaw_ref(X_s[..., 0], steer_s)
+        ref_s = self.yaw_scaled(ref)
+        yaw_s = ref_s + X_s[..., 1] if self.cfg.residual_yaw else X_s[..., 1]
+        return ref, ref_s, yaw_s
+
     def readout(self, X_s: Tensor, u_s: Tensor, fused: bool = False) -> Rollout:
         """Yaw reconstruction and output network on states (B, T, 2), inputs (B, T, 4)."""
         vx_s = X_s[..., 0]
-        ref = self.yaw_ref(vx_s, u_s[..., I_STEER])
-        ref_s = self.yaw_scaled(ref)
-        yaw_s = ref_s + X_s[..., 1] if self.cfg.residual_yaw else X_s[..., 1]
+        ref, ref_s, yaw_s = self.reconstruct_yaw(X_s, u_s[..., I_STEER])
         g_in = torch.stack(
             [vx_s, yaw_s, u_s[..., I_TORQUE], u_s[..., I_BRAKE], u_s[..., I_STEER]], dim=-1
         )

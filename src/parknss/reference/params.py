@@ -14,11 +14,9 @@ from pathlib import Path
 
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.config import StrictModel, load_config, override
 from parknss.signals import BLIND_ZONE_KMH
 from parknss.vehicle import VehicleGeometry
-
-DEFAULT_VEHICLE_YAML = CONFIG_DIR / "reference_vehicle.yaml"
 
 
 class GeometryParams(StrictModel):
@@ -201,15 +199,10 @@ class ReferenceVehicleParams(StrictModel):
 
     def replace(self, **groups: dict) -> ReferenceVehicleParams:
         """A copy with some fields of some groups changed: ``replace(drive={"delay_s": 0})``."""
-        data = self.model_dump()
-        for group, fields in groups.items():
-            if isinstance(fields, dict):
-                data[group].update(fields)
-            else:
-                data[group] = fields
-        return ReferenceVehicleParams.model_validate(data)
+        return override(self, groups)
 
 
 def load_vehicle_params(path: str | Path | None = None) -> ReferenceVehicleParams:
-    """Read reference-vehicle parameters from a YAML file (defaults when path is None)."""
-    return load_config(ReferenceVehicleParams, path)
+    """Read reference-vehicle parameters from ``path`` (default: the shipped
+    configs/reference_vehicle.yaml)."""
+    return load_config(ReferenceVehicleParams, path, default="reference_vehicle.yaml")

@@ -16,9 +16,43 @@ from parknss.vehicle import VehicleGeometry
 OBSTACLE_COLOURS = {"car": "#9aa5b1", "curb": "#6b4f3a", "barrier": "#c0392b"}
 
 
-def _outline(ax, poly: np.ndarray, **kw) -> None:
+def outline(ax, poly: np.ndarray, **kw) -> None:
+    """Draw the closed outline of polygon ``poly`` (M, 2) on ``ax``."""
     closed = np.vstack([poly, poly[:1]])
     ax.plot(closed[:, 0], closed[:, 1], **kw)
+
+
+def scene_axes(scene, frame: bool = False):
+    """(fig, ax) of a 12 in wide figure of ``scene`` with its obstacles filled (and the
+    map rectangle outlined when ``frame``)."""
+    xmin, ymin, xmax, ymax = scene.bounds
+    width = 12.0
+    height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
+    fig, ax = plt.subplots(figsize=(width, height + 1.0))
+    if frame:
+        ax.add_patch(
+            plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8)
+        )
+    for ob in scene.obstacles:
+        colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
+        ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
+    return fig, ax
+
+
+def finish_scene(fig, ax, scene, geom: VehicleGeometry, title: str, path, lw: float) -> Path:
+    """Outline the start (solid) and goal (dotted) footprints with line width ``lw``, fit
+    the map with a 0.5 m border, label, add the legend and save the PNG at ``path``."""
+    xmin, ymin, xmax, ymax = scene.bounds
+    outline(ax, footprint(scene.start, geom), color="#2471a3", lw=lw, label="start")
+    outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=lw, ls=":", label="goal")
+    ax.set_aspect("equal")
+    ax.set_xlim(xmin - 0.5, xmax + 0.5)
+    ax.set_ylim(ymin - 0.5, ymax + 0.5)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.legend(loc="upper right", fontsize=8)
+    return save(fig, path)
 
 
 def _draw_path(ax, traj: Trajectory, colour: str, label: str, lw: float) -> None:
@@ -64,18 +98,11 @@ def draw_plan(
     are marked with x. Returns the PNG path.
     """
     geom = geom or VehicleGeometry()
-    xmin, ymin, xmax, ymax = scene.bounds
-    width = 12.0
-    height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
-    fig, ax = plt.subplots(figsize=(width, height + 1.0))
-    ax.add_patch(plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8))
-    for ob in scene.obstacles:
-        colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
-        ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
+    fig, ax = scene_axes(scene, frame=True)
     main = refined if refined is not None and refined.segments else coarse
     if main is not None and main.segments:
         for pose in _footprints_along(main, footprint_every_m):
-            _outline(ax, footprint(pose, geom), color="#2e86c1", lw=0.4, alpha=0.5)
+            outline(ax, footprint(pose, geom), color="#2e86c1", lw=0.4, alpha=0.5)
     if coarse is not None and coarse.segments:
         _draw_path(ax, coarse, "#27ae60", "coarse (Hybrid A*)", 1.6)
     if refined is not None and refined.segments:
@@ -83,13 +110,4 @@ def draw_plan(
     if main is not None:
         for seg in main.segments[:-1]:
             ax.plot(*seg.poses[-1, :2], "kx", ms=8, mew=2)
-    _outline(ax, footprint(scene.start, geom), color="#2471a3", lw=1.8, label="start")
-    _outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=1.8, ls=":", label="goal")
-    ax.set_aspect("equal")
-    ax.set_xlim(xmin - 0.5, xmax + 0.5)
-    ax.set_ylim(ymin - 0.5, ymax + 0.5)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(title or scene.meta.name)
-    ax.legend(loc="upper right", fontsize=8)
-    return save(fig, path)
+    return finish_scene(fig, ax, scene, geom, title or scene.meta.name, path, 1.8)

@@ -1,5 +1,6 @@
 """Closed-loop figures: Fig. 8 (planned vs driven path in the scene) and Fig. 9 (vehicle
-states vx, ω_z, ax, ay under several plants on a common time axis)."""
+states vx, ω_z, ax, ay under several plants on a common time axis); :func:`draw_scene_run`
+draws both for a :class:`~parknss.sim.session.SceneRun`."""
 
 from __future__ import annotations
 
@@ -8,20 +9,16 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from parknss.report.plan_figure import OBSTACLE_COLOURS
+from parknss.report.plan_figure import finish_scene, outline, scene_axes
 from parknss.report.style import save, shade_reverse
 from parknss.signals import ms_to_kmh, rad_to_deg
 from parknss.sim.geometry import footprint
+from parknss.sim.session import SceneRun
 from parknss.sim.trajectory import Trajectory
 from parknss.vehicle import VehicleGeometry
 
 PLANT_COLOURS = {"kinematic": "#00bcd4", "chain": "#e67e22", "reference": "#8e44ad"}
 PLANNED_COLOUR = "#27ae60"
-
-
-def _outline(ax, poly: np.ndarray, **kw) -> None:
-    closed = np.vstack([poly, poly[:1]])
-    ax.plot(closed[:, 0], closed[:, 1], **kw)
 
 
 def draw_driven(
@@ -38,13 +35,7 @@ def draw_driven(
     footprint of each run is outlined. Returns the PNG path.
     """
     geom = geom or VehicleGeometry()
-    xmin, ymin, xmax, ymax = scene.bounds
-    width = 12.0
-    height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
-    fig, ax = plt.subplots(figsize=(width, height + 1.0))
-    for ob in scene.obstacles:
-        colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
-        ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)
+    fig, ax = scene_axes(scene)
     first = True
     for seg in trajectory.segments:
         ax.plot(
@@ -60,17 +51,10 @@ def draw_driven(
         colour = PLANT_COLOURS.get(name, "#34495e")
         ax.plot(s["x"], s["y"], "-", color=colour, lw=1.1, label=f"driven ({name})")
         pose = (s["x"][-1], s["y"][-1], s["heading"][-1])
-        _outline(ax, footprint(pose, geom), color=colour, lw=1.0)
-    _outline(ax, footprint(scene.start, geom), color="#2471a3", lw=1.4, label="start")
-    _outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=1.4, ls=":", label="goal")
-    ax.set_aspect("equal")
-    ax.set_xlim(xmin - 0.5, xmax + 0.5)
-    ax.set_ylim(ymin - 0.5, ymax + 0.5)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(title or f"{scene.meta.name}: planned vs driven")
-    ax.legend(loc="upper right", fontsize=8)
-    return save(fig, path)
+        outline(ax, footprint(pose, geom), color=colour, lw=1.0)
+    return finish_scene(
+        fig, ax, scene, geom, title or f"{scene.meta.name}: planned vs driven", path, 1.4
+    )
 
 
 def _smooth(v: np.ndarray, n: int) -> np.ndarray:
@@ -122,3 +106,16 @@ def draw_states(
     if title:
         axes[0].set_title(title)
     return save(fig, path)
+
+
+def draw_scene_run(run: SceneRun, out: str | Path) -> dict[str, str]:
+    """Figs. 8 and 9 of a simulated scene as ``fig8_<scene>_<plants>.png`` and
+    ``fig9_...`` in ``out``; {"fig8": path, "fig9": path}, or {} when not plannable."""
+    if run.plan.trajectory is None:
+        return {}
+    out = Path(out)
+    runs = {o.plant: o.series for o in run.outcomes}
+    name, tag = run.scene.meta.name, "_vs_".join(runs)
+    fig8 = draw_driven(run.scene, run.plan.trajectory, runs, out / f"fig8_{name}_{tag}.png")
+    fig9 = draw_states(runs, out / f"fig9_{name}_{tag}.png", title=name)
+    return {"fig8": str(fig8), "fig9": str(fig9)}

@@ -169,6 +169,36 @@ def distance(polys: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return np.where(intersects(a, b), 0.0, d)
 
 
+def body_circles(poses, geom: VehicleGeometry) -> tuple[np.ndarray, np.ndarray, float]:
+    """(cx (N,), cy (N,), r m): centre of the footprint at each rear-axle pose (N, 3+) and
+    the radius of the circle through its corners, the broad phase of clearance and
+    collision (the footprint lies inside the circle)."""
+    p = np.atleast_2d(np.asarray(poses, dtype=float))
+    local = body_corners(geom)
+    c = local.mean(axis=0)
+    r = float(np.hypot(*(local[0] - c)))
+    cx = p[:, 0] + np.cos(p[:, 2]) * c[0] - np.sin(p[:, 2]) * c[1]
+    cy = p[:, 1] + np.sin(p[:, 2]) * c[0] + np.cos(p[:, 2]) * c[1]
+    return cx, cy, r
+
+
+def polygon_circle(poly) -> tuple[np.ndarray, float]:
+    """(centre (2,), r m): the vertex centroid of a polygon (M, 2) and the radius of the
+    circle about it through its farthest vertex (a convex polygon lies inside it)."""
+    o = np.asarray(poly, dtype=float)
+    oc = o.mean(axis=0)
+    return oc, float(np.max(np.hypot(*(o - oc).T)))
+
+
+def polygon_circles(polygons: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(centres (M, 2), radii (M,)) of :func:`polygon_circle` for M polygons."""
+    circles = [polygon_circle(o) for o in polygons]
+    return (
+        np.array([c for c, _ in circles], dtype=float).reshape(-1, 2),
+        np.array([r for _, r in circles], dtype=float),
+    )
+
+
 def clearance(
     poses,
     geom: VehicleGeometry,
@@ -187,15 +217,10 @@ def clearance(
     out = np.full(len(p), np.inf)
     if not len(p):
         return out
-    local = body_corners(geom)
-    centre_local = local.mean(axis=0)
-    r_car = float(np.hypot(*(local[0] - centre_local)))
-    cx = p[:, 0] + np.cos(p[:, 2]) * centre_local[0] - np.sin(p[:, 2]) * centre_local[1]
-    cy = p[:, 1] + np.sin(p[:, 2]) * centre_local[0] + np.cos(p[:, 2]) * centre_local[1]
+    cx, cy, r_car = body_circles(p, geom)
     for obs in obstacles:
         o = np.asarray(obs, dtype=float)
-        oc = o.mean(axis=0)
-        r_obs = float(np.max(np.hypot(*(o - oc).T)))
+        oc, r_obs = polygon_circle(o)
         gap = np.hypot(cx - oc[0], cy - oc[1]) - r_car - r_obs  # lower bound of distance
         if cutoff is None:
             idx = np.arange(len(p))
@@ -210,18 +235,34 @@ def clearance(
 
 
 def collides(
-    poses, geom: VehicleGeometry, obstacles: Sequence[np.ndarray], margin: float = 0.0
+    poses,
+    geom: VehicleGeometry,
+    obstacles: Sequence[np.ndarray],
+    margin: float = 0.0,
+    circles: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """(N,) True where the footprint is closer than ``margin`` m to any obstacle.
 
-    With ``margin = 0`` this is pure SAT overlap (touching counts as a collision).
+    With ``margin = 0`` this is pure SAT overlap (touching counts as a collision), tested
+    only for obstacles whose bounding circle meets the footprint's (:func:`body_circles`)
+    at some pose; ``circles`` are the obstacles' :func:`polygon_circles` when the caller
+    checks the same obstacles many times.
     """
     p = np.atleast_2d(np.asarray(poses, dtype=float))
     if margin <= 0.0:
-        fp = footprints(p, geom)
         hit = np.zeros(len(p), dtype=bool)
-        for obs in obstacles:
-            hit |= intersects(fp, obs)
+        if not len(obstacles) or not len(p):
+            return hit
+        oc, r_obs = circles if circles is not None else polygon_circles(obstacles)
+        cx, cy, r_car = body_circles(p, geom)
+        # broad phase: obstacles whose bounding circle no pose's circle meets (1 µm of
+        # slack) cannot overlap; the others get the exact test on every pose
+        gap = np.hypot(cx[:, None] - oc[:, 0], cy[:, None] - oc[:, 1])
+        near = np.flatnonzero(np.any(gap <= r_car + r_obs + 1e-6, axis=0))
+        if len(near):
+            fp = footprints(p, geom)
+            for j in near:
+                hit |= intersects(fp, obstacles[j])
         return hit
     return clearance(p, geom, obstacles) < margin
 
@@ -242,7 +283,12 @@ def arc_interpolate(p0: np.ndarray, p1: np.ndarray, tau: np.ndarray) -> np.ndarr
     """Poses at fractions ``tau`` (M,) between pose pairs p0, p1 (M, 3+), (M, 3).
 
     The car follows the circular arc (or line) from p0 to p1 whose heading changes
-    linearly, which is exact when the pair lies on a kinematic-bicycle arc.
+    linearly, which is exact when the pair lies on a kinematic-bicycle arc. This is the
+    inverse problem of :func:`parknss.vehicle.arc_step` (the arc is given by its two end
+    poses, not by a start pose and a curvature), written in the chord form that every
+    dense check and path reference has always used; the tests check it against
+    ``arc_step`` to 1e-12. (Rewritten as a call of ``arc_step`` it rounds differently in
+    the last bits, which moves IPOPT's refined plans and so Table V.)
     """
     d = p1[:, :2] - p0[:, :2]
     chord = np.hypot(d[:, 0], d[:, 1])

@@ -1,25 +1,26 @@
 """The executed vehicles of the closed loop: kinematic, chain (learned) and reference plants.
 
-Every plant here is a :class:`SimPlant`: ``reset()`` puts the car at rest in park,
-``advance(act)`` moves it one dt = 10 ms under one :class:`Actuation` and returns what the
-car's bus reports (:class:`~parknss.plant.PlantOutput`), and ``motion`` gives the
-(vx m/s, yaw rate rad/s) that moved the rear axle during that step, from which the closed
-loop integrates the pose with :class:`PoseIntegrator`. The planner keeps its own
-kinematic model; only the executed plant changes.
+Every plant here is a :class:`~parknss.plant.Plant` (``reset``; ``step(Commands)`` moves
+the car one dt = 10 ms and returns what its bus reports), which is the one protocol the
+closed loop drives. A :class:`SimPlant` adds what the closed loop needs beside it: a
+``name``, the ``motion`` (vx m/s, yaw rate rad/s) that moved the rear axle during the last
+step, from which the loop integrates the pose with :class:`PoseIntegrator`, and the
+``command_interface`` that turns the tracker's requests into the plant's Commands. The
+planner keeps its own kinematic model; only the executed plant changes.
 
 What each plant consumes (the design choice, stated once):
 
-* An :class:`Actuation` is the command interface's output: the production command set
-  {gear, torque_cmd, decel_cmd, steer_cmd} (:class:`~parknss.plant.Commands`) plus the
-  interface's own signed speed target (m/s), i.e. the speed its longitudinal controller
-  is trying to reach after the gear logic and the brake-hold have had their say.
-* :class:`KinematicPlant` (ideal) executes the speed target and ``steer_cmd`` at once:
-  vx = speed target (zero unless the engaged gear agrees with its sign), steering angle
-  = ``steer_cmd``, yaw rate from the kinematic bicycle with the constant ratio (the
-  planner's model). It ignores torque and deceleration: it has no actuators. The gear
-  state machine, stops and standstill still run through the interface.
 * :class:`ReferencePlant` (the synthetic truth vehicle) and :class:`ChainPlant` (the
-  learned command-to-vehicle chain) consume only the Commands, as a real car does.
+  learned command-to-vehicle chain) consume only the Commands {gear, torque_cmd,
+  decel_cmd, steer_cmd}, as a real car does, from the production
+  :class:`~parknss.sim.control.interface.CommandInterface`.
+* :class:`KinematicPlant` (ideal) has no actuators: it executes a speed at once. Its speed
+  comes through its own adapter, :class:`KinematicInterface`: the production command
+  interface (gear state machine, brake-hold, standstill confirmation) that hands the
+  plant its signed speed target with every command. The plant drives vx = that target
+  (zero unless the engaged gear agrees with its sign), steering angle = ``steer_cmd``,
+  yaw rate from the kinematic bicycle with the constant ratio (the planner's model). It
+  ignores torque and deceleration.
 
 The controller sees the bus output (the reference vehicle's wheel-speed blind zone,
 noise and quantization included); the pose moves with the plant's true motion (the
@@ -29,53 +30,36 @@ reference's noise-free truth; the chain's and the kinematic plant's own states).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from parknss.config import CONFIG_DIR, SHIPPED_CHAIN
+from parknss.config import SHIPPED_CHAIN
 from parknss.errors import CheckpointError, ConfigError, ParknssError
 from parknss.plant import Commands, Plant, PlantOutput
 from parknss.signals import DT
-from parknss.vehicle import VehicleGeometry, yaw_rate_ref
+from parknss.sim.control.interface import CommandInterface, InterfaceConfig, Request
+from parknss.vehicle import VehicleGeometry, arc_step, yaw_rate_ref
 
 PLANT_KINDS: tuple[str, ...] = ("kinematic", "chain", "reference")
 
 
-@dataclass(frozen=True)
-class Actuation:
-    """One 10 ms output of the command interface.
-
-    Attributes:
-        commands: the production command set sent to a real (or learned) car.
-        speed_target: the interface's signed speed target, m/s (negative in reverse);
-            only the ideal kinematic plant executes it.
-    """
-
-    commands: Commands
-    speed_target: float
-
-
 @runtime_checkable
-class SimPlant(Protocol):
-    """A plant the closed loop can execute (see the module docstring)."""
+class SimPlant(Plant, Protocol):
+    """A :class:`~parknss.plant.Plant` as the closed loop executes it (module docstring)."""
 
     name: str
-    dt: float
-
-    def reset(self) -> PlantOutput:
-        """Put the car at rest in park; return the first bus output."""
-        ...
-
-    def advance(self, act: Actuation) -> PlantOutput:
-        """Advance one dt under ``act``; return the bus output at the end of the step."""
-        ...
 
     @property
     def motion(self) -> tuple[float, float]:
         """(vx m/s, yaw rate rad/s) that moved the rear axle during the last step."""
+        ...
+
+    def command_interface(
+        self, cfg: InterfaceConfig | None = None, dt: float = DT
+    ) -> CommandInterface:
+        """The command interface that drives this plant (a fresh one per run)."""
         ...
 
 
@@ -86,11 +70,10 @@ class SimPlant(Protocol):
 class PoseIntegrator:
     """Rear-axle pose (x m, y m, heading rad) integrated from vx and yaw rate.
 
-    Each step moves along the exact circular arc of constant (vx, ω) over dt: the
-    heading turns by ω·dt and the position moves vx·dt along the chord direction
-    heading + ω·dt/2 shortened by sinc(ω·dt/2). This is exact whenever vx and ω are
-    constant over the step (so a constant-speed, constant-steer run traces an exact
-    circle of radius vx/ω).
+    Each step moves along the exact circular arc of constant (vx, ω) over dt
+    (:func:`parknss.vehicle.arc_step` with ds = vx·dt, dheading = ω·dt), exact whenever
+    vx and ω are constant over the step (so a constant-speed, constant-steer run traces
+    an exact circle of radius vx/ω).
     """
 
     def __init__(self, pose, dt: float = DT) -> None:
@@ -103,14 +86,9 @@ class PoseIntegrator:
 
     def step(self, vx: float, yaw_rate: float) -> tuple[float, float, float]:
         """Advance one dt at speed vx (m/s, signed) and yaw rate (rad/s); return the pose."""
-        ds = vx * self.dt
-        dth = yaw_rate * self.dt
-        half = 0.5 * dth
-        chord = ds * (math.sin(half) / half if abs(half) > 1e-12 else 1.0 - half * half / 6.0)
-        ang = self.heading + half
-        self.x += chord * math.cos(ang)
-        self.y += chord * math.sin(ang)
-        self.heading += dth
+        self.x, self.y, self.heading = arc_step(
+            self.x, self.y, self.heading, vx * self.dt, yaw_rate * self.dt
+        )
         return self.pose
 
 
@@ -140,11 +118,12 @@ def _finite(cmd: Commands, who: str) -> None:
 
 
 class KinematicPlant:
-    """The ideal plant: the interface's speed target and steering happen at once.
+    """The ideal plant: its speed target and the steering happen at once.
 
-    vx = speed target when the commanded gear agrees with its sign (0 otherwise, and in
-    park), steering angle = steer_cmd clamped to the lock, yaw rate = vx/L·tan(δ/i) with
-    the constant ratio (the planner's model), ax = Δvx/dt, ay = vx·ω (at the rear axle).
+    vx = ``speed_target`` (m/s, signed; set by its :class:`KinematicInterface` before
+    each step) when the commanded gear agrees with its sign (0 otherwise, and in park),
+    steering angle = steer_cmd clamped to the lock, yaw rate = vx/L·tan(δ/i) with the
+    constant ratio (the planner's model), ax = Δvx/dt, ay = vx·ω (at the rear axle).
     Torque and brake pressure are reported as 0: there are no actuators.
     """
 
@@ -155,17 +134,21 @@ class KinematicPlant:
         self.dt = float(dt)
         self.reset()
 
-    def reset(self) -> PlantOutput:
-        self._vx = self._w = self._steer = 0.0
-        self._out = PlantOutput(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    def reset(
+        self, vx: float = 0.0, yaw_rate: float = 0.0, steer: float = 0.0, gear: int = 0
+    ) -> PlantOutput:
+        """Start from the given state (at rest in park by default); return its output."""
+        self._vx, self._w, self._steer = float(vx), float(yaw_rate), float(steer)
+        self.speed_target = self._vx
+        self._out = PlantOutput(int(gear), 0.0, 0.0, self._steer, self._vx, self._w, 0.0, 0.0)
         return self._out
 
-    def advance(self, act: Actuation) -> PlantOutput:
-        cmd = act.commands
+    def step(self, cmd: Commands) -> PlantOutput:
+        """Advance one dt: drive ``speed_target`` in the commanded gear, steer ``steer_cmd``."""
         _finite(cmd, "kinematic plant")
         lock = self.geom.steer_lock_deg
         steer = min(max(cmd.steer_cmd, -lock), lock)
-        v = float(act.speed_target)
+        v = float(self.speed_target)
         if not math.isfinite(v):
             raise ParknssError(f"kinematic plant: speed target is not finite ({v!r})")
         if cmd.gear == 0 or v * cmd.gear < 0.0:
@@ -180,12 +163,36 @@ class KinematicPlant:
     def motion(self) -> tuple[float, float]:
         return (self._vx, self._w)
 
+    def command_interface(
+        self, cfg: InterfaceConfig | None = None, dt: float = DT
+    ) -> KinematicInterface:
+        return KinematicInterface(self, cfg, dt)
 
-class _WrappedPlant:
-    """A Commands-level :class:`~parknss.plant.Plant` as a SimPlant.
+
+class KinematicInterface(CommandInterface):
+    """The kinematic plant's adapter: the production command interface, which also hands
+    the plant its signed speed target (m/s; 0 while it holds, gear · requested speed
+    while it drives) with every command, so the ideal plant executes the speed the
+    interface's longitudinal controller is trying to reach."""
+
+    def __init__(
+        self, plant: KinematicPlant, cfg: InterfaceConfig | None = None, dt: float = DT
+    ) -> None:
+        super().__init__(cfg, dt)
+        self.plant = plant
+
+    def step(self, req: Request, y: PlantOutput) -> Commands:
+        cmd = super().step(req, y)
+        self.plant.speed_target = self.speed_target
+        return cmd
+
+
+class _TruthPlant:
+    """A Commands-level :class:`~parknss.plant.Plant` with a name and a motion.
 
     The pose moves with the mean of the state before and after each step (trapezoidal),
-    read from ``truth()`` (the noise-free state where the plant has one).
+    read from ``truth()`` (the noise-free state where the plant has one). Driven by the
+    production :class:`~parknss.sim.control.interface.CommandInterface`.
     """
 
     name = "plant"
@@ -200,16 +207,19 @@ class _WrappedPlant:
         """The noise-free output of the last step (the bus output where there is none)."""
         return out
 
-    def reset(self) -> PlantOutput:
-        out = self.plant.reset()
+    def reset(
+        self, vx: float = 0.0, yaw_rate: float = 0.0, steer: float = 0.0, gear: int = 0
+    ) -> PlantOutput:
+        """Start the wrapped plant from the given state (at rest in park by default)."""
+        out = self.plant.reset(vx, yaw_rate, steer, gear)
         t = self.truth(out)
         self._prev = (t.vx, t.yaw_rate)
         self._motion = (0.0, 0.0)
         return out
 
-    def advance(self, act: Actuation) -> PlantOutput:
-        _finite(act.commands, f"{self.name} plant")
-        out = self.plant.step(act.commands)
+    def step(self, cmd: Commands) -> PlantOutput:
+        _finite(cmd, f"{self.name} plant")
+        out = self.plant.step(cmd)
         t = self.truth(out)
         self._motion = (0.5 * (self._prev[0] + t.vx), 0.5 * (self._prev[1] + t.yaw_rate))
         self._prev = (t.vx, t.yaw_rate)
@@ -219,12 +229,17 @@ class _WrappedPlant:
     def motion(self) -> tuple[float, float]:
         return self._motion
 
+    def command_interface(
+        self, cfg: InterfaceConfig | None = None, dt: float = DT
+    ) -> CommandInterface:
+        return CommandInterface(cfg, dt)
 
-class ReferencePlant(_WrappedPlant):
+
+class ReferencePlant(_TruthPlant):
     """The synthetic truth vehicle (:class:`parknss.reference.vehicle.ReferenceVehicle`).
 
     Args:
-        vehicle_yaml: vehicle parameter file (default configs/reference_vehicle.yaml).
+        vehicle_yaml: vehicle parameter file (default: the shipped reference_vehicle.yaml).
         seed: sensor-noise seed (None: the file's seed).
     """
 
@@ -234,8 +249,7 @@ class ReferencePlant(_WrappedPlant):
         from parknss.reference.params import load_vehicle_params
         from parknss.reference.vehicle import ReferenceVehicle
 
-        path = Path(vehicle_yaml) if vehicle_yaml else CONFIG_DIR / "reference_vehicle.yaml"
-        params = load_vehicle_params(path if path.is_file() or vehicle_yaml else None)
+        params = load_vehicle_params(vehicle_yaml or None)
         self.vehicle = ReferenceVehicle(params, seed=seed)
         self.geom = self.vehicle.geometry
         super().__init__(self.vehicle)
@@ -244,26 +258,19 @@ class ReferencePlant(_WrappedPlant):
         return self.vehicle.last_truth or out
 
 
-class ChainPlant(_WrappedPlant):
+class ChainPlant(_TruthPlant):
     """The learned command-to-vehicle chain (envelopes -> actuator models -> NSS).
 
-    Loads ``parknss.chain.load_chain(path)`` lazily (default: the shipped chain in
-    models/chain) and steps it in real time. The chain must implement the
-    :class:`~parknss.plant.Plant` protocol (reset/step with Commands). Raises
-    :class:`~parknss.errors.ParknssError` with one line when the chain module or the
-    checkpoint is unavailable; there is no stand-in.
+    Loads ``parknss.chain.load_chain(path)`` (default: the shipped chain in models/chain)
+    and steps it in real time. Raises :class:`~parknss.errors.CheckpointError` with one
+    line when the checkpoint cannot be loaded; there is no stand-in.
     """
 
     name = "chain"
 
     def __init__(self, path: str | Path | None = None) -> None:
-        try:
-            from parknss.chain import load_chain
-        except ImportError as exc:
-            raise ParknssError(
-                "chain plant unavailable: parknss.chain is not installed in this build "
-                "(use --plant kinematic or reference)"
-            ) from exc
+        from parknss.chain import load_chain
+
         p = Path(path) if path else SHIPPED_CHAIN
         try:
             chain = load_chain(p)
@@ -292,3 +299,17 @@ def make_plant(
     if kind == "chain":
         return ChainPlant(chain_path)
     raise ConfigError(f"unknown plant {kind!r}; one of {', '.join(PLANT_KINDS)}")
+
+
+def parse_plants(spec: str) -> list[str]:
+    """Plant kinds from a comma list ("kinematic,chain"), in order, without repeats;
+    one-line ConfigError for an unknown kind or an empty list."""
+    out: list[str] = []
+    for p in (s.strip() for s in spec.split(",")):
+        if p not in PLANT_KINDS:
+            raise ConfigError(f"unknown plant {p!r}; one of {', '.join(PLANT_KINDS)}")
+        if p not in out:
+            out.append(p)
+    if not out:
+        raise ConfigError("no plant given")
+    return out

@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
-from parknss.errors import PlanningError
+from parknss.config import StrictModel, load_config
+from parknss.errors import ConfigError, PlanningError
 from parknss.sim.geometry import convex_polygon, rectangle
 from parknss.vehicle import VehicleGeometry
 
@@ -48,6 +48,9 @@ TIERS = (0, 1, 2)
 N_CELLS = 36
 PERTURBATIONS = ("skew_pos", "skew_neg", "jitter_a", "jitter_b", "tighter", "looser", "combined")
 N_ROBUST = N_CELLS * len(PERTURBATIONS)
+GRIDS = ("36", "12", "252")
+"""The scenario grids by name: the 36-cell grid, its 12-cell tuning core, the 252-cell
+robustness grid."""
 SCENE_FORMAT = "parknss.scene"
 SCENE_VERSION = 1
 
@@ -117,9 +120,8 @@ class ScenariosConfig(StrictModel):
 
 
 def load_scenarios_config(path: str | Path | None = None) -> ScenariosConfig:
-    """Read configs/scenarios.yaml (or ``path``); defaults when the file is absent."""
-    p = Path(path) if path is not None else CONFIG_DIR / "scenarios.yaml"
-    return load_config(ScenariosConfig, p if (path is not None or p.is_file()) else None)
+    """Read ``path`` (default: the shipped configs/scenarios.yaml)."""
+    return load_config(ScenariosConfig, path, default="scenarios.yaml")
 
 
 # ---------------------------------------------------------------------------------------
@@ -513,3 +515,83 @@ def robust_scene(
 def grid(cfg: ScenariosConfig | None = None, geom: VehicleGeometry | None = None) -> list[Scene]:
     """All 36 grid scenes in index order."""
     return [grid_scene(i, cfg, geom) for i in range(N_CELLS)]
+
+
+def grid_cells(grid: str, cfg: ScenariosConfig | None = None, spec: str | None = None) -> list[int]:
+    """Cell indices of grid "36", "12" (the tuning core, indices of the 36-cell grid) or
+    "252", or the subset ``spec`` of them ("0-5,9"); one-line ConfigError otherwise."""
+    if grid not in GRIDS:
+        raise ConfigError(f"--grid {grid!r}: one of {', '.join(GRIDS)}")
+    if grid == "12":
+        allowed = core_cells(cfg if cfg is not None else load_scenarios_config())
+    else:
+        allowed = list(range(N_ROBUST if grid == "252" else N_CELLS))
+    if not spec:
+        return allowed
+    out: list[int] = []
+    for part in spec.split(","):
+        lo, _, hi = part.strip().partition("-")
+        try:
+            rng = range(int(lo), int(hi or lo) + 1)
+        except ValueError as exc:
+            raise ConfigError(f"--cells {spec!r}: expected numbers like 0-5,9") from exc
+        for i in rng:
+            if i not in allowed:
+                raise ConfigError(f"--cells: {i} is not a cell of grid {grid}")
+            out.append(i)
+    return out
+
+
+def cell_scene(
+    grid: str, index: int, cfg: ScenariosConfig | None = None, geom: VehicleGeometry | None = None
+) -> Scene:
+    """Scene ``index`` of grid "252" (robustness) or of the 36-cell grid ("36", "12")."""
+    if grid == "252":
+        return robust_scene(index, cfg, geom)
+    return grid_scene(index, cfg, geom)
+
+
+def resolve_scene(spec: str, cfg: ScenariosConfig | None = None) -> Scene:
+    """A Scene from a JSON file path, a grid cell index 0-35, or ``robust:N`` (0-251)."""
+    cfg = cfg if cfg is not None else load_scenarios_config()
+    text = spec.strip()
+    if text.isdigit():
+        return grid_scene(int(text), cfg)
+    if text.lower().startswith("robust:") and text[7:].isdigit():
+        return robust_scene(int(text[7:]), cfg)
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.exists():
+        return Scene.load(path)
+    raise PlanningError(f"--scene {spec!r}: not a scene file, a cell 0-35 or robust:N")
+
+
+def run_cells(
+    fn: str,
+    grid: str,
+    cells: list[int],
+    kwargs: dict,
+    *,
+    executor: str = "local",
+    workers: int = 1,
+    address: str | None = None,
+    cache_dir: str | Path | None = None,
+    progress: bool = True,
+    desc: str = "cells",
+) -> list:
+    """Each cell of a grid as one job of the one executor (:func:`parknss.executor.run_jobs`,
+    local pool or Ray): ``fn`` ("module:function") is called as ``fn(grid=, index=,
+    **kwargs)`` with grid "252" or "36" (the core's cells are 36-grid cells) and JSON
+    ``kwargs``; the results in the order of ``cells``."""
+    from parknss.executor import Job, run_jobs
+
+    kind = "252" if grid == "252" else "36"
+    jobs = [Job(fn, {"grid": kind, "index": i, **kwargs}, name=f"cell {i}") for i in cells]
+    return run_jobs(
+        jobs,
+        executor=executor,
+        workers=workers,
+        cache_dir=cache_dir,
+        address=address,
+        progress=progress,
+        desc=desc,
+    )

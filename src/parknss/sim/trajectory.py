@@ -7,6 +7,7 @@ stops. Poses are rear-axle centre (x m, y m, heading rad, counter-clockwise from
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,3 +74,13 @@ class Trajectory:
     def directions(self) -> np.ndarray:
         """(M,) direction of travel of each pose of :meth:`poses`."""
         return np.concatenate([np.full(len(s.poses), s.direction) for s in self.segments])
+
+    def digest(self) -> str:
+        """Short SHA-256 of everything the tracker reads (per segment: direction, poses,
+        speed, steering, time stamps, as float64 bytes): equal digests, the same drive."""
+        h = hashlib.sha256()
+        for s in self.segments:
+            h.update(str(int(s.direction)).encode())
+            for a in (s.poses, s.speed, s.steer, s.t):
+                h.update(b"-" if a is None else np.ascontiguousarray(a, dtype=float).tobytes())
+        return h.hexdigest()[:16]

@@ -8,21 +8,31 @@ the mean duration (s). Each round visits every tuned gain and tries it multiplie
 without improvement shrinks the step by ``shrink``; the search stops after ``rounds``
 rounds or when the step falls below ``min_step``. The robustness grids use held-out
 cells only: the core is tier 1 of the 36-cell grid, never a perturbed cell.
+
+:func:`tune_gains` is the whole ``parknss tune`` job: every evaluation runs the core
+through :func:`parknss.sim.grid.run_grid` (the one executor, local pool or Ray).
 """
 
 from __future__ import annotations
 
+import json
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
-from pydantic import Field, ValidationError
+from pydantic import Field
 
-from parknss.config import StrictModel
-from parknss.errors import ConfigError
+from parknss.config import StrictModel, override
+from parknss.errors import ConfigError, ParknssError
+from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.control.interface import InterfaceConfig
+from parknss.sim.grid import run_grid
+from parknss.sim.plants import parse_plants
+from parknss.sim.scenarios import grid_cells
+from parknss.sim.session import check_plants
 
 
 class TuningConfig(StrictModel):
@@ -95,8 +105,8 @@ def coordinate_descent(
                 cand = dict(gains)
                 cand[g] = gains[g] * (1.0 + sign * step) if gains[g] != 0 else sign * step
                 try:
-                    InterfaceConfig.model_validate({**start.model_dump(), **cand})
-                except ValidationError:  # outside the gain's valid range: skip this way
+                    override(start, cand)
+                except ConfigError:  # outside the gain's valid range: skip this way
                     continue
                 value = evaluate(dict(cand))
                 result.evaluations += 1
@@ -125,7 +135,7 @@ def write_tuned(
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     gains = {k: float(f"{v:.6g}") for k, v in result.gains.items()}
-    tuned = InterfaceConfig.model_validate({**start.model_dump(), **gains})
+    tuned = override(start, gains, source="tuned gains")
     head = (
         "# Command-interface gains tuned by coordinate descent (parknss tune).\n"
         f"# objective {result.initial_objective:.3f} -> {result.objective:.3f} "
@@ -133,3 +143,59 @@ def write_tuned(
     )
     p.write_text(head + yaml.safe_dump(tuned.model_dump(), sort_keys=False))
     return p
+
+
+def tune_gains(
+    plant: str | None,
+    out: Path,
+    *,
+    rounds: int | None = None,
+    files: SimConfigFiles | None = None,
+    executor: str = "local",
+    workers: int = 1,
+    address: str | None = None,
+    log: Callable[[str], None] | None = None,
+) -> dict:
+    """``parknss tune``: coordinate descent of the interface gains on the 12-cell core
+    under ``plant`` (None: the chain if it can be built here, else the reference
+    vehicle); writes ``interface_tuned.yaml`` and ``tune.json`` to ``out`` and returns the
+    summary (gains, objective history, evaluations, wall s)."""
+    files = files or SimConfigFiles()
+    say = log or (lambda _msg: None)
+    cfg = files.closed_loop_config()
+    if plant is None:
+        try:
+            check_plants(["chain"], cfg)
+            plant = "chain"
+        except ParknssError:
+            plant = "reference"
+            say("chain plant unavailable: tuning on the reference plant")
+    kind = parse_plants(plant)[0]
+    check_plants([kind], cfg)
+    tcfg = TuningConfig() if rounds is None else TuningConfig(rounds=rounds)
+    start = files.interface_config()
+    cells = grid_cells("12", files.scenarios_config())
+
+    def evaluate(gains: dict[str, float]) -> float:
+        rows = run_grid(
+            "12",
+            [kind],
+            cells,
+            workers,
+            files=files,
+            interface_overrides=gains,
+            executor=executor,
+            address=address,
+            progress=False,
+        )
+        value = objective(rows, tcfg)
+        say(f"{json.dumps({k: round(v, 4) for k, v in gains.items()})} -> {value:.3f}")
+        return value
+
+    t0 = time.perf_counter()
+    result = coordinate_descent(evaluate, start, tcfg, say)
+    path = write_tuned(result, start, out / "interface_tuned.yaml", f"plant {kind}, core cells.")
+    doc = result.to_json()
+    doc.update(plant=kind, yaml=str(path), cells=cells, wall_s=round(time.perf_counter() - t0, 1))
+    (out / "tune.json").write_text(json.dumps(doc, indent=2))
+    return doc

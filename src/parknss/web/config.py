@@ -11,7 +11,7 @@ from pathlib import Path
 
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.config import StrictModel, load_config
 
 
 class WebConfig(StrictModel):
@@ -47,6 +47,5 @@ class WebConfig(StrictModel):
 
 
 def load_web_config(path: str | Path | None = None, **overrides) -> WebConfig:
-    """Read configs/web.yaml (or ``path``) plus ``overrides``; defaults without a file."""
-    p = Path(path) if path is not None else CONFIG_DIR / "web.yaml"
-    return load_config(WebConfig, p if (path is not None or p.is_file()) else None, **overrides)
+    """Read ``path`` (default: the shipped configs/web.yaml) plus ``overrides``."""
+    return load_config(WebConfig, path, default="web.yaml", overrides=overrides)

@@ -2,10 +2,10 @@
 scene, so every plant drives the same plan), execute it through a plant, and shape the
 results into the response models.
 
-Planning and execution are the ones ``parknss simulate`` uses
-(:func:`parknss.sim.closed_loop.plan_scene` with the closed-loop steering reserve and
-margin, :func:`parknss.sim.closed_loop.run_cell` on that plan), read from the same
-configs, so both entry points give the same outcome for the same scene.
+Planning and execution are the ones ``parknss plan`` and ``parknss simulate`` use
+(:func:`parknss.sim.planner.plan_scene` with the closed-loop steering reserve and
+margin, :func:`parknss.sim.session.run_cell` on that plan), read from the same
+configs, so every entry point gives the same plan and outcome for the same scene.
 """
 
 from __future__ import annotations
@@ -20,19 +20,15 @@ from dataclasses import replace
 import numpy as np
 
 import parknss
+from parknss.config import override
 from parknss.errors import ParknssError
 from parknss.sim import geometry
 from parknss.sim import scenarios as sc
-from parknss.sim.closed_loop import (
-    ClosedLoopConfig,
-    Plan,
-    load_closed_loop_config,
-    not_plannable,
-    plan_scene,
-    run_cell,
-)
+from parknss.sim.closed_loop import ClosedLoopConfig, load_closed_loop_config
 from parknss.sim.control.interface import load_interface_config
-from parknss.sim.plants import PLANT_KINDS, make_plant
+from parknss.sim.planner import Plan, plan_scene
+from parknss.sim.plants import PLANT_KINDS
+from parknss.sim.session import build_plant, not_plannable, run_cell
 from parknss.vehicle import VehicleGeometry
 from parknss.web import payload
 from parknss.web.config import WebConfig
@@ -208,13 +204,7 @@ class SimulatorService:
             hit = self.cache.get(key)
             if hit is not None:
                 return hit, True
-            plan = plan_scene(
-                scene,
-                self.cfg.planning_config,
-                self.geom,
-                self.closed_loop.steer_reserve,
-                self.closed_loop.plan_margin_m,
-            )
+            plan = plan_scene(scene, self.closed_loop, self.cfg.planning_config, self.geom)
             self.cache.put(key, plan)
             return plan, False
 
@@ -251,20 +241,14 @@ class SimulatorService:
     def _loop_config(self, seed: int | None) -> ClosedLoopConfig:
         if seed is None:
             return self.closed_loop
-        return self.closed_loop.model_copy(update={"plant_seed": int(seed)})
+        return override(self.closed_loop, {"plant_seed": int(seed)}, source="seed")
 
     def _make_plant(self, kind: str, seed: int | None):
         if kind not in PLANT_KINDS:
             raise BadSceneError(f"unknown plant {kind!r}; one of {', '.join(PLANT_KINDS)}")
         cfg = self._loop_config(seed)
         try:
-            return make_plant(
-                kind,
-                geom=self.geom,
-                vehicle_yaml=cfg.reference_vehicle,
-                chain_path=cfg.chain_path,
-                seed=cfg.plant_seed,
-            )
+            return build_plant(kind, cfg, self.geom)
         except ParknssError as exc:
             msg = str(exc)
             if not msg.startswith(f"{kind} plant"):

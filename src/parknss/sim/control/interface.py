@@ -32,7 +32,7 @@ from pathlib import Path
 
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.config import StrictModel, load_config, shipped_config
 from parknss.errors import ConfigError, ParknssError
 from parknss.plant import Commands, PlantOutput
 from parknss.signals import BLIND_ZONE_MS, DT
@@ -66,11 +66,11 @@ class InterfaceConfig(StrictModel):
 
 
 def load_interface_config(path: str | Path | None = None) -> InterfaceConfig:
-    """Read configs/interface.yaml (or ``path``); defaults when the file is absent."""
-    p = Path(path) if path is not None else CONFIG_DIR / "interface.yaml"
-    cfg = load_config(InterfaceConfig, p if (path is not None or p.is_file()) else None)
+    """Read ``path`` (default: the shipped configs/interface.yaml)."""
+    cfg = load_config(InterfaceConfig, path, default="interface.yaml")
     if cfg.hold_max_ms2 < cfg.hold_decel_ms2:
-        raise ConfigError(f"{p}: hold_max_ms2 must be >= hold_decel_ms2")
+        where = path if path is not None else shipped_config("interface.yaml")
+        raise ConfigError(f"{where}: hold_max_ms2 must be >= hold_decel_ms2")
     return cfg
 
 

@@ -44,7 +44,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from parknss.config import CONFIG_DIR, StrictModel, load_config
+from parknss.config import StrictModel, load_config
 from parknss.sim import geometry
 from parknss.sim.geometry import DenseCheckConfig
 from parknss.sim.planning import reeds_shepp as rs
@@ -106,9 +106,8 @@ class PlanningConfig(StrictModel):
 
 
 def load_planning_config(path: str | Path | None = None) -> PlanningConfig:
-    """Read configs/planning.yaml (or ``path``); defaults when the file is absent."""
-    p = Path(path) if path is not None else CONFIG_DIR / "planning.yaml"
-    return load_config(PlanningConfig, p if (path is not None or p.is_file()) else None)
+    """Read ``path`` (default: the shipped configs/planning.yaml)."""
+    return load_config(PlanningConfig, path, default="planning.yaml")
 
 
 @dataclass
@@ -608,8 +607,3 @@ def verify_trajectory(traj: Trajectory, scene, geom: VehicleGeometry, cfg: Plann
         return True, math.inf
     worst = float(geometry.clearance(dense, geom, obstacles, cutoff=1.0).min())
     return worst >= cfg.safety_margin_m - 1e-9, worst
-
-
-def plan(scene, cfg: PlanningConfig | None = None, geom: VehicleGeometry | None = None):
-    """Plan one scene with a fresh :class:`HybridAStar` (see its docs)."""
-    return HybridAStar(cfg, geom).plan(scene)

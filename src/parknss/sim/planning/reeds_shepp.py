@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parknss.errors import PlanningError
+from parknss.vehicle import arc_step
 
 PI = math.pi
 HALF_PI = 0.5 * math.pi
@@ -282,10 +283,7 @@ def arc_poses(pose, kappa: float, s: np.ndarray) -> np.ndarray:
     """
     x0, y0, th0 = (float(v) for v in pose)
     s = np.asarray(s, dtype=float)
-    dth = kappa * s
-    chord = s * np.sinc(dth / (2.0 * PI))  # np.sinc(x) = sin(πx)/(πx)
-    mid = th0 + 0.5 * dth
-    return np.stack([x0 + chord * np.cos(mid), y0 + chord * np.sin(mid), th0 + dth], axis=1)
+    return np.stack(arc_step(x0, y0, th0, s, kappa * s), axis=1)
 
 
 @dataclass(frozen=True)
@@ -404,11 +402,7 @@ def sample_paths(
             skip.append(prev_dir == d)  # continuation: joint already sampled
             owner.append(pi)
             prev_dir = d
-            dth = k * length
-            chord = length * (math.sin(0.5 * dth) / (0.5 * dth) if dth != 0.0 else 1.0)
-            x += chord * math.cos(th + 0.5 * dth)
-            y += chord * math.sin(th + 0.5 * dth)
-            th += dth
+            x, y, th = arc_step(x, y, th, length, k * length)
     counts_a = np.array(counts)
     seg_id = np.repeat(np.arange(len(counts)), counts_a)
     j = np.arange(int(counts_a.sum())) - np.repeat(np.cumsum(counts_a) - counts_a, counts_a)
@@ -416,17 +410,8 @@ def sample_paths(
     seg_id, j = seg_id[keep], j[keep]
     st = np.array(starts)[seg_id]
     sv = j * np.array(ds)[seg_id]
-    dth = np.array(kap)[seg_id] * sv
-    chord = sv * np.sinc(dth / (2.0 * PI))
-    mid = st[:, 2] + 0.5 * dth
-    out = np.column_stack(
-        [
-            st[:, 0] + chord * np.cos(mid),
-            st[:, 1] + chord * np.sin(mid),
-            st[:, 2] + dth,
-            np.array(dirs, dtype=float)[seg_id],
-        ]
-    )
+    x, y, th = arc_step(st[:, 0], st[:, 1], st[:, 2], sv, np.array(kap)[seg_id] * sv)
+    out = np.column_stack([x, y, th, np.array(dirs, dtype=float)[seg_id]])
     path_of = np.array(owner)[seg_id]
     cuts = np.flatnonzero(np.diff(path_of)) + 1
     result = np.split(out, cuts)

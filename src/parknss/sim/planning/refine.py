@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from parknss.config import override
 from parknss.errors import PlanningError
 from parknss.sim import geometry
 from parknss.sim.planning.hybrid_astar import (
@@ -136,7 +137,7 @@ def refine(
 
     info = {**coarse.info, "refined_from": coarse.source, "margin_m": margin}
     traj = Trajectory(segments, source="refined", info=info)
-    check_cfg = pcfg.model_copy(update={"safety_margin_m": margin})
+    check_cfg = override(pcfg, {"safety_margin_m": margin}, source="refine margin")
     passed, clr = verify_trajectory(traj, scene, geom, check_cfg)
     if not passed:
         what = "left the map" if clr < 0 else f"clearance {clr:.3f} m < {margin:.3f} m"

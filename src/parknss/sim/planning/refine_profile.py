@@ -16,7 +16,7 @@ import numpy as np
 from parknss.sim import geometry
 from parknss.sim.planning.refine_problem import SegmentSolution, WarmStart, heading_change
 from parknss.sim.trajectory import Segment
-from parknss.vehicle import VehicleGeometry
+from parknss.vehicle import VehicleGeometry, arc_step
 
 
 def _peak(length: float, v_max: float, a_max: float) -> tuple[float, float, float, float]:
@@ -171,14 +171,7 @@ def sample_solution(
         m = max(1, math.ceil(dist[k] / step - 1e-9))
         sub = dist[k] * np.arange(1, m + 1) / m  # travelled within the interval, m
         sig = direction * sub
-        dth = sig * kap[k]
-        chord = sig * np.sinc(dth / 2 / np.pi)
-        ang = p[k, 2] + dth / 2
-        out_p.extend(
-            np.column_stack(
-                [p[k, 0] + chord * np.cos(ang), p[k, 1] + chord * np.sin(ang), p[k, 2] + dth]
-            )
-        )
+        out_p.extend(np.column_stack(arc_step(p[k, 0], p[k, 1], p[k, 2], sig, sig * kap[k])))
         root = np.sqrt(np.maximum(v[k] ** 2 + 2 * acc[k] * sub, 0.0))
         tau = np.clip(2 * sub / np.maximum(v[k] + root, 1e-12), 0.0, h)
         out_v.extend(np.maximum(v[k] + acc[k] * tau, 0.0))

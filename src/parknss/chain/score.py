@@ -16,7 +16,8 @@ import torch
 
 from parknss.actuators.envelopes import Envelope
 from parknss.actuators.models import ActuatorModel
-from parknss.chain import Chain, chain_predictions
+from parknss.chain.model import Chain, NSSProvenance
+from parknss.chain.trials import chain_predictions
 from parknss.data.trial import Trial
 from parknss.metrics.errors import open_loop_errors
 from parknss.nss.model import NSSModel
@@ -40,10 +41,13 @@ class ChainScore:
 
 
 def make_chain(
-    nss: NSSModel, models: dict[str, ActuatorModel | None], env: Envelope
+    nss: NSSModel,
+    models: dict[str, ActuatorModel | None],
+    env: Envelope,
+    provenance: NSSProvenance | None = None,
 ) -> Chain:
     """A float64 chain (channels absent from ``models`` are measured)."""
-    return Chain(nss, dict(models), env).double()
+    return Chain(nss, dict(models), env, provenance).double()
 
 
 def chain_score(chain: Chain, trials: Sequence[Trial]) -> ChainScore:

@@ -1,4 +1,4 @@
-"""One way to run many independent fits or simulations: a local pool or Ray.
+"""One way to run many independent fits or simulations: a local pool or Ray (layer L0).
 
 A :class:`Job` names a top-level function by import path (``"package.module:function"``)
 and its keyword arguments, which must be JSON-serialisable; the function returns a

@@ -2,9 +2,12 @@
 
 :class:`NumpyNSS` is the NSS vehicle model's forward-Euler step and readout in NumPy
 (weights copied once in float64); :class:`RealtimeChain` strings the input envelope, the
-three actuator steppers (:mod:`parknss.actuators.steppers`), the output envelope and the
-NSS together with exactly the arithmetic of :meth:`parknss.chain.Chain.rollout`, so the
-two agree to rounding over whole trials (tests/test_chain.py asserts 1e-10 in float64).
+three actuator steppers (:mod:`parknss.actuators.steppers`), the output envelope
+(:class:`parknss.actuators.envelopes.EnvelopeState`) and the NSS together with exactly the
+arithmetic of :meth:`parknss.chain.model.Chain.rollout`, so the two agree to rounding over
+whole trials (tests/test_chain.py asserts 1e-10 in float64). :class:`NumpyNSS` is tested
+on its own against :meth:`parknss.nss.model.NSSModel.step`, the one source of the NSS's
+Euler step and yaw readout (tests/test_chain.py).
 
 Timing of one call ``step(gear, torque_cmd, decel_cmd, steer_cmd)`` at sample k: the
 features of sample k are read from the NSS state x̂(k); the submodels give the actuals
@@ -21,29 +24,24 @@ import math
 import numpy as np
 
 from parknss.actuators.envelopes import Envelope, EnvelopeState
-from parknss.actuators.spec import CHANNELS
+from parknss.actuators.models import ActuatorModel
+from parknss.actuators.spec import CHANNELS, feature_values
 from parknss.errors import CheckpointError
-
-
-def _linears(seq) -> list[tuple[np.ndarray, np.ndarray]]:
-    from torch import nn
-
-    return [
-        (m.weight.detach().double().numpy().copy(), m.bias.detach().double().numpy().copy())
-        for m in seq
-        if isinstance(m, nn.Linear)
-    ]
+from parknss.nss.model import NSSModel
+from parknss.nss.nets import numpy_layers, numpy_tanh_mlp
 
 
 class NumpyNSS:
-    """Forward-Euler step and readout of an :class:`~parknss.nss.model.NSSModel` in NumPy."""
+    """Forward-Euler step and readout of an :class:`~parknss.nss.model.NSSModel` in NumPy
+    float64 (weights and scalings copied once): the real-time twin of
+    :meth:`NSSModel.step`."""
 
-    def __init__(self, model) -> None:
+    def __init__(self, model: NSSModel) -> None:
         if model.cfg.integrator != "euler":
             raise CheckpointError("the real-time chain implements the forward-Euler NSS only")
         self.dt = float(model.dt)
-        self.state = _linears(model.state_net)
-        self.output = _linears(model.output_net)
+        self.state = numpy_layers(model.state_net)
+        self.output = numpy_layers(model.output_net)
         self._z = np.zeros(self.state[0][0].shape[1])  # [x, u_s] buffer of the first layer
         self._g = np.zeros(5)  # [vx_s, yaw_s, torque_s, pressure_s, steer_s] output input
 
@@ -100,10 +98,7 @@ class NumpyNSS:
         h = self._g
         h[0], h[1] = x[0], ys
         h[2:] = us[1:]
-        for W, b in self.output[:-1]:
-            h = np.tanh(W @ h + b)
-        W, b = self.output[-1]
-        y = W @ h + b
+        y = numpy_tanh_mlp(self.output, h)
         return (self.vx(x), yaw, y[0] * self.out_sc[0] + self.out_off[0],
                 y[1] * self.out_sc[1] + self.out_off[1])
 
@@ -112,18 +107,15 @@ class NumpyNSS:
         z = self._z
         z[:2] = x
         z[2:] = us
-        W0, b0 = self.state[0]
-        h = np.tanh(W0 @ z + b0)
-        for W, b in self.state[1:-1]:
-            h = np.tanh(W @ h + b)
-        W, b = self.state[-1]
-        return x + self.dt * (W @ h + b)
+        return x + self.dt * numpy_tanh_mlp(self.state, z)
 
 
 class RealtimeChain:
     """Envelopes -> steppers -> NSS, one sample per call (see the module doc)."""
 
-    def __init__(self, nss_model, models: dict, envelope: Envelope) -> None:
+    def __init__(
+        self, nss_model: NSSModel, models: dict[str, ActuatorModel | None], envelope: Envelope
+    ) -> None:
         self.nss = NumpyNSS(nss_model)
         self.specs = {c: (m.spec if m is not None else None) for c, m in models.items()}
         self.steppers = {c: (m.stepper() if m is not None else None) for c, m in models.items()}
@@ -169,7 +161,7 @@ class RealtimeChain:
             if spec is None:
                 ys.append(float(measured[i]))
                 continue
-            f = _features(spec.features, vx, yaw, g) if spec.features else None
+            f = np.array(feature_values(spec.features, vx, yaw, g)) if spec.features else None
             ys.append(self.steppers[ch].step(c[i], f))
         act = self.env.output(*ys) if self.full else self._output_partial(ys)
         u = np.array([g, act[0], act[1], act[2]])
@@ -182,7 +174,3 @@ class RealtimeChain:
         self.yaw_prev = self.nss.yaw(self.x, us[3])[1]
         return act, out
 
-
-def _features(names, vx: float, yaw: float, gear: float) -> np.ndarray:
-    vals = {"speed": abs(vx), "vx": vx, "yaw_rate": yaw, "gear": gear}
-    return np.array([vals[n] for n in names])

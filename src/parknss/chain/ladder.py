@@ -27,18 +27,36 @@ from dataclasses import dataclass, field
 import torch
 
 from parknss.actuators.config import ActuatorConfig
-from parknss.actuators.cotune import cotune
 from parknss.actuators.envelopes import Envelope, identify_envelope
-from parknss.actuators.evaluate import ChainScore, chain_score, make_chain
 from parknss.actuators.fit import fit_candidate
 from parknss.actuators.models import ActuatorModel
-from parknss.actuators.select import nss_states
 from parknss.actuators.spec import CHANNELS, CandidateSpec
-from parknss.chain import Chain
+from parknss.chain.cotune import cotune
+from parknss.chain.model import Chain, NSSProvenance
+from parknss.chain.score import ChainScore, chain_score, make_chain
+from parknss.chain.selection import nss_states
+from parknss.data.normalize import Normalizer
 from parknss.data.trial import Trial
+from parknss.data.windows import make_windows, window_length
 from parknss.errors import ConfigError
+from parknss.metrics.errors import open_loop_errors
+from parknss.nss.batch import make_batch
+from parknss.nss.checkpoint import LoadedModel
+from parknss.nss.model import NORMALIZED, NSSModel
+from parknss.nss.predict import predict_trials
+from parknss.nss.train import build_model, epoch_loss
 
 Progress = Callable[[str], None]
+
+LADDER_ROWS: tuple[tuple[str, str], ...] = (
+    ("all_measured", "All channels measured (reference)"),
+    ("signal_target", "Assembled chain, signal-fitted 1 s NARX brake"),
+    ("cotuned_target", "Assembled chain, consequence-tuned 1 s NARX brake"),
+    ("selected_assembly", "Assembled chain, Phase B winners (no co-tuning)"),
+    ("monolithic", "Monolithic NSS on commands, no submodels"),
+    ("static_affine", "Static affine actuator maps, no dynamics"),
+)
+"""Table IV's rows in the paper's order: (key in ``Deployment.rows``, label)."""
 
 
 @dataclass
@@ -66,28 +84,30 @@ class Deployment:
         }
 
 
-def _fit_label(label: str, nss, trials, cfg, env, progress) -> ActuatorModel:
+def _fit_label(
+    label: str, nss: NSSModel, trials: list[Trial], cfg: ActuatorConfig, env: Envelope,
+    progress: Progress,
+) -> ActuatorModel:
     """Fit a Phase B label (``+nssft``: then the NSS-state fine-tune) on ``trials``."""
     spec = CandidateSpec.parse(label.removesuffix("+nssft"))
     model, rep = fit_candidate(spec, trials, cfg, env)
     progress(f"fitted {spec.name} on {len(trials)} trials ({rep.wall_s:.1f} s)")
     if label.endswith("+nssft") and cfg.select.nss_state_finetune_iters > 0:
-        from parknss.actuators.fit import FitReport, SignalScore, StepMetrics
-        from parknss.actuators.select import Candidate
-
-        dummy = SignalScore(0.0, 0.0, 0.0, StepMetrics(0.0, 0.0, 0.0, 0.0), 0)
-        states = nss_states(nss, Candidate(spec, model, FitReport(0, 0, 0), dummy), env, trials)
+        states = nss_states(nss, model, env, trials)
         model, _ = fit_candidate(spec, trials, cfg, env, states=states, init=model,
                                  iters=cfg.select.nss_state_finetune_iters)
     return model
 
 
 def build_deployment(
-    nss, trials: Sequence[Trial], cfg: ActuatorConfig, winners: dict[str, str],
-    progress: Progress,
+    loaded: LoadedModel, trials: Sequence[Trial], cfg: ActuatorConfig,
+    winners: dict[str, str], progress: Progress,
 ) -> Deployment:
-    """Fit, co-tune and score the deployment chain on ``trials`` (see the module doc)."""
+    """Fit, co-tune and score the deployment chain on ``trials`` (see the module doc) on
+    the NSS ``loaded``; the deployed chain carries that NSS's provenance."""
     t0 = time.perf_counter()
+    nss = loaded.model
+    prov = NSSProvenance(loaded.config, loaded.training)
     trials = list(trials)
     missing = [c for c in CHANNELS if c not in winners]
     if missing:
@@ -101,13 +121,13 @@ def build_deployment(
     rows: dict[str, ChainScore] = {}
     rows["all_measured"] = chain_score(make_chain(nss, {}, env), trials)
     progress(f"all measured: vx full {rows['all_measured'].vx_full:.4f}")
-    selected = make_chain(nss, models, env)
+    selected = make_chain(nss, models, env, prov)
     rows["selected_assembly"] = chain_score(selected, trials)
     progress(f"selected assembly: vx full {rows['selected_assembly'].vx_full:.4f}")
     rows["signal_target"] = chain_score(make_chain(nss, {**others, target.channel: signal}, env),
                                         trials)
     progress(f"signal-fitted {target.name}: vx full {rows['signal_target'].vx_full:.4f}")
-    tuned_chain = make_chain(nss, {**others, target.channel: tuned}, env)
+    tuned_chain = make_chain(nss, {**others, target.channel: tuned}, env, prov)
     rep = cotune(tuned_chain, target.channel, trials, cfg.cotune, progress)
     rows["cotuned_target"] = chain_score(tuned_chain, trials)
     progress(f"co-tuned {target.name}: vx full {rows['cotuned_target'].vx_full:.4f}")
@@ -132,17 +152,9 @@ def command_trial(tr: Trial) -> Trial:
                  tr.provenance)
 
 
-def monolithic_score(loaded, trials: Sequence[Trial], cfg: ActuatorConfig,
+def monolithic_score(loaded: LoadedModel, trials: Sequence[Trial], cfg: ActuatorConfig,
                      progress: Progress) -> tuple[ChainScore, dict]:
     """The monolithic-NSS row (see the module doc): (score, how it was trained)."""
-    from parknss.data.normalize import Normalizer
-    from parknss.data.windows import make_windows, window_length
-    from parknss.metrics.errors import open_loop_errors
-    from parknss.nss.batch import make_batch
-    from parknss.nss.model import NORMALIZED
-    from parknss.nss.predict import predict_trials
-    from parknss.nss.train import build_model, epoch_loss
-
     t0 = time.perf_counter()
     ncfg = loaded.config
     cmd = [command_trial(tr) for tr in trials]
@@ -168,3 +180,16 @@ def monolithic_score(loaded, trials: Sequence[Trial], cfg: ActuatorConfig,
     info = {"epochs": cfg.ladder.monolithic_epochs, "lr": cfg.ladder.monolithic_lr,
             "warm_start": "given NSS weights", "wall_s": time.perf_counter() - t0}
     return ChainScore(e.vx_mse_full_kmh2, e.vx_mse_moving_kmh2, e.yaw_mse_moving_degs2), info
+
+
+def ladder_text(doc: dict) -> str:
+    """Table IV as fixed-width text from a :func:`parknss.chain.build.run_build` document."""
+    lines = [f"{'Configuration':52s} {'vx full':>9s} {'vx moving':>10s}  [(km/h)^2]"]
+    for key, name in LADDER_ROWS:
+        r = doc["rows"].get(key)
+        if r is not None:
+            lines.append(f"{name:52s} {r['vx_full']:9.4f} {r['vx_moving']:10.4f}")
+    lines.append(f"deployed: {doc['deployed']}")
+    if "artefact" in doc:
+        lines.append(f"wrote {doc['artefact']}")
+    return "\n".join(lines)

@@ -13,13 +13,17 @@ the largest deviation between the two paths, and which envelope acted how often.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from parknss.actuators.config import StressConfig
+from parknss.actuators.config import StressConfig, load_actuator_config
 from parknss.actuators.envelopes import Activity
+from parknss.chain.deployed import DeployedChain, load_chain
+from parknss.config import SHIPPED_CHAIN
 from parknss.data.trial import Trial
+from parknss.nss.campaigns import load_campaign
 from parknss.signals import COMMAND_CHANNELS, DT
 
 
@@ -59,6 +63,10 @@ def scenarios(tr: Trial, cfg: StressConfig, seed: int = 0) -> dict[str, np.ndarr
 
 @dataclass
 class StressRow:
+    """One scenario: envelope violations and non-finite states (counts), the largest
+    real-time vs batched vx difference (m/s), the actuals' ranges (N·m, bar, deg), the
+    highest steering rate (deg/s) and which envelopes acted how often."""
+
     scenario: str
     violations: int
     nonfinite_states: int
@@ -74,8 +82,10 @@ class StressRow:
         return dict(self.__dict__)
 
 
-def run_stress(deployed, tr: Trial, cfg: StressConfig, seed: int = 0) -> list[StressRow]:
-    """Run every scenario through ``deployed`` (a :class:`parknss.chain.DeployedChain`)."""
+def run_stress(
+    deployed: DeployedChain, tr: Trial, cfg: StressConfig, seed: int = 0
+) -> list[StressRow]:
+    """Run every scenario through ``deployed`` (real time and batched)."""
     env = deployed.chain.envelope
     rows = []
     x0 = [tr["vx"][0], tr["yaw_rate"][0]]
@@ -105,3 +115,36 @@ def run_stress(deployed, tr: Trial, cfg: StressConfig, seed: int = 0) -> list[St
             float(rate.max()), activity.active(), activity.to_json(),
         ))
     return rows
+
+
+def stress_study(
+    chain: Path | None = None, data: Path | None = None, config: Path | None = None
+) -> dict:
+    """``parknss actuators stress``: the stress study of the chain artefact ``chain`` (None:
+    the shipped one) on the first park-in trial of the campaign ``data`` (None: the default
+    campaign) with the ``stress`` section of the actuator YAML ``config``; one JSON
+    document (``ok``: no violation, no non-finite state in any scenario)."""
+    torch.set_num_threads(1)
+    cfg = load_actuator_config(config)
+    campaign = load_campaign(data, "actuators", "parknss actuators stress")
+    dep = load_chain(chain or SHIPPED_CHAIN)
+    tr = next((t for t in campaign if t.maneuver.startswith("park_in")), campaign[0])
+    rows = run_stress(dep, tr, cfg.stress)
+    return {"chain": str(chain or SHIPPED_CHAIN), "trial": tr.id,
+            "envelope": dep.chain.envelope.to_json(), "rows": [r.to_json() for r in rows],
+            "ok": all(r.violations == 0 and r.nonfinite_states == 0 for r in rows)}
+
+
+def stress_text(doc: dict) -> str:
+    """The :func:`stress_study` document as a fixed-width table."""
+    lines = [f"{'scenario':14s} {'viol':>5s} {'NaN st':>6s} {'torque':>16s} {'pressure':>14s} "
+             f"{'steer':>18s} {'rate°/s':>8s}  active envelopes"]
+    for r in doc["rows"]:
+        lines.append(
+            f"{r['scenario']:14s} {r['violations']:5d} {r['nonfinite_states']:6d} "
+            f"{r['torque_range'][0]:7.1f}..{r['torque_range'][1]:<7.1f} "
+            f"{r['pressure_range'][0]:5.1f}..{r['pressure_range'][1]:<7.1f} "
+            f"{r['steer_range'][0]:8.1f}..{r['steer_range'][1]:<8.1f} "
+            f"{r['max_steer_rate_dps']:8.1f}  {', '.join(sorted(set(r['active']))) or '-'}")
+    lines.append("all within envelopes, no NaN states" if doc["ok"] else "ENVELOPE VIOLATED")
+    return "\n".join(lines)

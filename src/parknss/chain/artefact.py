@@ -24,10 +24,12 @@ import torch
 from pydantic import ValidationError
 from safetensors.torch import load_file
 
+from parknss.actuators.candidates import build_candidate
 from parknss.actuators.config import ArchConfig
 from parknss.actuators.envelopes import Envelope
-from parknss.actuators.models import Scaling, build_candidate
+from parknss.actuators.models import ActuatorModel, Scaling
 from parknss.actuators.spec import CHANNELS, CandidateSpec
+from parknss.chain.model import Chain, NSSProvenance
 from parknss.errors import CheckpointError, ConfigError
 from parknss.nss.checkpoint import (
     atomic_save_tensors,
@@ -37,7 +39,6 @@ from parknss.nss.checkpoint import (
     save_model,
     sha256_file,
 )
-from parknss.nss.config import NSSConfig
 from parknss.signals import SCHEMA_VERSION
 
 FORMAT = "parknss-chain"
@@ -47,17 +48,18 @@ WEIGHTS = "actuators.safetensors"
 NSS_DIR = "nss"
 
 
-def write_chain(folder: str | Path, chain, meta: dict) -> Path:
-    """Write ``chain`` (a :class:`parknss.chain.Chain` with all three submodels)."""
+def write_chain(folder: str | Path, chain: Chain, meta: dict) -> Path:
+    """Write ``chain`` (all three submodels, and its NSS's provenance) into ``folder``;
+    ``meta`` is the build's metadata (recorded under ``build``)."""
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     missing = [c for c in CHANNELS if chain.model(c) is None]
     if missing:
         raise CheckpointError(f"{out}: a deployed chain needs all submodels; {missing} measured")
-    cfg = getattr(chain, "nss_config", None)
-    if not isinstance(cfg, NSSConfig):
-        raise CheckpointError(f"{out}: the chain carries no NSS config (set chain.nss_config)")
-    save_model(out / NSS_DIR, chain.nss, cfg, getattr(chain, "nss_training", {}))
+    cfg = chain.provenance.config
+    if cfg is None:
+        raise CheckpointError(f"{out}: the chain carries no NSS config (chain.provenance)")
+    save_model(out / NSS_DIR, chain.nss, cfg, chain.provenance.training)
     tensors, channels = {}, {}
     for ch in CHANNELS:
         m = chain.model(ch)
@@ -108,7 +110,7 @@ def _read_meta(folder: Path) -> dict:
     return doc
 
 
-def _build_models(doc: dict, src: Path) -> dict:
+def _build_models(doc: dict, src: Path) -> dict[str, ActuatorModel]:
     chans = doc.get("channels")
     if not isinstance(chans, dict):
         raise CheckpointError(f"{src}: no channels entry")
@@ -130,7 +132,7 @@ def _build_models(doc: dict, src: Path) -> dict:
     return models
 
 
-def _load_weights(doc: dict, folder: Path, models: dict) -> None:
+def _load_weights(doc: dict, folder: Path, models: dict[str, ActuatorModel]) -> None:
     w = doc.get("weights")
     if not isinstance(w, dict) or "sha256" not in w:
         raise CheckpointError(f"{folder / META}: no weights entry")
@@ -159,10 +161,8 @@ def _load_weights(doc: dict, folder: Path, models: dict) -> None:
         m.requires_grad_(False)
 
 
-def read_chain(path: str | Path):
+def read_chain(path: str | Path) -> tuple[Chain, dict, Path]:
     """(Chain, build metadata, folder) from an artefact folder."""
-    from parknss.chain import Chain
-
     folder = Path(path)
     doc = _read_meta(folder)
     src = folder / META
@@ -176,7 +176,5 @@ def read_chain(path: str | Path):
     env = Envelope.from_json(doc.get("envelope") or {})
     models = _build_models(doc, src)
     _load_weights(doc, folder, models)
-    chain = Chain(loaded.model, models, env)
-    chain.nss_config = loaded.config
-    chain.nss_training = loaded.training
+    chain = Chain(loaded.model, models, env, NSSProvenance(loaded.config, loaded.training))
     return chain, dict(doc.get("build") or {}), folder

@@ -41,7 +41,8 @@ import torch
 
 from parknss.actuators.config import CotuneConfig
 from parknss.actuators.spec import CHANNEL_INDEX, CHANNELS
-from parknss.chain import ACTUALS, Chain, chain_predictions
+from parknss.chain.model import ACTUALS, Chain
+from parknss.chain.trials import chain_predictions
 from parknss.data.trial import Trial
 from parknss.errors import DataError, ParknssError
 from parknss.signals import BLIND_ZONE_MS, COMMAND_CHANNELS, KMH_PER_MS
@@ -149,7 +150,7 @@ def cotune(
     need_ctx = bool(frozen) or target.spec.state_aware
     nss32 = copy.deepcopy(chain.nss).float()
     nss32.requires_grad_(True)  # for the fused kernel's input gradient only
-    sur = Chain(nss32, {c: chain.model(c) for c in CHANNELS if c not in frozen},
+    sur = Chain(nss32, {c: m for c, m in chain.models().items() if c not in frozen},
                 chain.envelope)
     rng = np.random.default_rng(cfg.seed)
     opt = torch.optim.Adam(target.parameters(), lr=cfg.lr)

@@ -1,0 +1,88 @@
+"""The chain artefact loaded for use: a real-time :class:`~parknss.plant.Plant` and a
+batched evaluator.
+
+:class:`DeployedChain` implements the one Plant protocol (``dt``, ``reset``, ``step``)
+by the NumPy real-time twin (:class:`~parknss.chain.realtime.RealtimeChain`), so
+``parknss simulate --plant chain`` and the web simulator drive it like any other plant.
+Beyond the protocol it offers :meth:`DeployedChain.start`, the exact start of a trial
+replay (measured state, actuals and first command), and
+:meth:`DeployedChain.predict_trials`, whole-trial predictions by the batched rollout.
+:func:`load_chain` / :func:`save_chain` read and write the artefact folder
+(:mod:`parknss.chain.artefact`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from parknss.actuators.envelopes import Activity
+from parknss.chain.artefact import read_chain, write_chain
+from parknss.chain.model import Chain
+from parknss.chain.realtime import RealtimeChain
+from parknss.chain.trials import Predictions, chain_predictions
+from parknss.data.trial import Trial
+from parknss.plant import Commands, PlantOutput
+
+
+class DeployedChain:
+    """A chain ready to drive: ``chain`` (float64, eval), its real-time twin ``rt``, the
+    artefact's build metadata ``meta`` and its folder ``path`` (None when built in memory);
+    ``dt`` is the step in s."""
+
+    def __init__(self, chain: Chain, meta: dict | None = None, path: Path | None = None):
+        self.chain = chain.double().eval()
+        self.meta = meta or {}
+        self.path = path
+        self.rt = RealtimeChain(self.chain.nss, chain.models(), chain.envelope)
+        self.dt = self.rt.dt
+        self.reset()
+
+    # ------------------------------------------------------------ Plant protocol
+    def reset(
+        self, vx: float = 0.0, yaw_rate: float = 0.0, steer: float = 0.0, gear: int = 0
+    ) -> PlantOutput:
+        """At rest (by default) with the given steering angle; histories hold the rest
+        command (torque 0, decel 0, steer_cmd = steer)."""
+        self.rt.start([vx, yaw_rate], [0.0, 0.0, steer], [gear, 0.0, 0.0, steer])
+        return PlantOutput(int(gear), 0.0, 0.0, float(steer), float(vx), float(yaw_rate), 0.0, 0.0)
+
+    def step(self, cmd: Commands) -> PlantOutput:
+        """One 10 ms sample under ``cmd``: the actuals and states logged at this sample."""
+        act, (vx, yaw, ax, ay) = self.rt.step(
+            float(cmd.gear), float(cmd.torque_cmd), float(cmd.decel_cmd), float(cmd.steer_cmd)
+        )
+        return PlantOutput(int(cmd.gear), act[0], act[1], act[2], vx, yaw, ax, ay)
+
+    # ------------------------------------------------------- beyond the protocol
+    def start(self, x0: Sequence[float], y0: Sequence[float], cmd0: Sequence[float]) -> None:
+        """Exact start of a trial replay (not part of the Plant protocol): x0 [vx m/s,
+        yaw rad/s], actuals y0 [torque N·m, pressure bar, steer deg], the first command
+        cmd0 [gear, torque_cmd, decel_cmd, steer_cmd] filling the histories."""
+        self.rt.start(x0, y0, cmd0)
+
+    @property
+    def envelope_activity(self) -> Activity:
+        """How often each envelope acted since the real-time twin was built."""
+        return self.rt.env.activity
+
+    def predict_trials(self, trials: Iterable[Trial]) -> Predictions:
+        """Whole-trial predictions from the logged commands (:func:`chain_predictions`)."""
+        return chain_predictions(self.chain, trials)
+
+
+def load_chain(path: str | Path) -> DeployedChain:
+    """Load a chain artefact folder (one-line CheckpointError on any problem)."""
+    chain, meta, folder = read_chain(path)
+    return DeployedChain(chain, meta, folder)
+
+
+def save_chain(folder: str | Path, chain: Chain, meta: dict | None = None) -> Path:
+    """Write the chain artefact folder (see :mod:`parknss.chain.artefact`)."""
+    return write_chain(folder, chain, meta or {})
+
+
+def predict_chain_campaign(path: str | Path, trials: Iterable[Trial]) -> Predictions:
+    """Whole-trial chain predictions from the logged commands by the artefact at ``path``
+    (the chain counterpart of :func:`parknss.nss.predict.predict_campaign`)."""
+    return load_chain(path).predict_trials(trials)

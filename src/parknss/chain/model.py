@@ -1,0 +1,190 @@
+"""The command-to-vehicle chain: envelopes -> actuator submodels -> NSS (paper Fig. 2).
+
+Commands {gear, torque_cmd, decel_cmd, steer_cmd} pass the input envelope, the three
+actuator submodels (drive, brake, steering) and the output envelope to become the NSS input
+u = [gear, torque, brake_pressure, steer]; the NSS gives vx, yaw rate, ax, ay.
+
+:class:`Chain` (torch) is the batched, differentiable rollout used by selection,
+co-tuning and evaluation. A channel may be left *measured* (its submodel None: the logged
+actual is fed instead), which is how Phase B substitutes one candidate at a time. Without
+state-aware submodels the actuals are computed for the whole history at once and the NSS
+runs its fused kernel; with them the loop is interleaved sample by sample, the submodels
+reading the NSS-predicted state (feature timing in :mod:`parknss.actuators.spec`). The
+physics is not written here: the envelopes are :mod:`parknss.actuators.envelopes`, the
+Euler step and the yaw readout are the NSS's own (:meth:`NSSModel.step_function`,
+:meth:`NSSModel.reconstruct_yaw`).
+
+Initial conditions of a trial rollout: the measured state [vx(0), ω_z(0)] (as for the NSS
+alone), the measured actuals at k = 0 for the lag submodels, the first command filling
+the command histories.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from parknss.actuators.envelopes import Envelope, clean_commands, limit_outputs_torch
+from parknss.actuators.models import ActuatorModel
+from parknss.actuators.spec import CHANNELS, feature_values
+from parknss.errors import DataError
+from parknss.nss.config import NSSConfig
+from parknss.nss.model import I_STEER, NSSModel, Rollout
+from parknss.signals import ACTUAL_CHANNELS
+
+ACTUALS: tuple[str, ...] = ACTUAL_CHANNELS[1:]  # torque, brake_pressure, steer
+
+
+@dataclass
+class ChainRollout:
+    """actuals (B, T, 3) [torque N·m, pressure bar, steer deg] and the NSS rollout."""
+
+    actuals: Tensor
+    nss: Rollout
+
+
+def torch_features(names: tuple[str, ...], vx: Tensor, yaw: Tensor, gear: Tensor) -> Tensor:
+    """State features (B, F) from vx (m/s), yaw rate (rad/s), gear, each (B,)."""
+    return torch.stack(feature_values(names, vx, yaw, gear), dim=-1)
+
+
+@dataclass
+class NSSProvenance:
+    """What the chain's artefact records about its NSS besides the weights: the full
+    :class:`~parknss.nss.config.NSSConfig` it was trained with (None: unknown, the chain
+    cannot be saved) and its training metadata (epochs, best epoch, data hash, ...)."""
+
+    config: NSSConfig | None = None
+    training: dict[str, Any] = field(default_factory=dict)
+
+
+class Chain(nn.Module):
+    """Envelopes, one submodel (or None: measured) per channel, and the frozen NSS.
+
+    Attributes:
+        nss: the NSS vehicle model.
+        acts: the submodels present, by channel ("drive", "brake", "steering").
+        envelope: the input and output envelopes.
+        provenance: the NSS's config and training metadata, written into the artefact.
+    """
+
+    def __init__(
+        self,
+        nss: NSSModel,
+        models: dict[str, ActuatorModel | None],
+        envelope: Envelope,
+        provenance: NSSProvenance | None = None,
+    ) -> None:
+        super().__init__()
+        self.nss = nss
+        self.acts = nn.ModuleDict({c: m for c, m in models.items() if m is not None})
+        self.envelope = envelope
+        self.provenance = provenance or NSSProvenance()
+
+    def model(self, channel: str) -> ActuatorModel | None:
+        """The submodel of ``channel``, or None when the channel is measured."""
+        return self.acts[channel] if channel in self.acts else None  # noqa: SIM401
+
+    def models(self) -> dict[str, ActuatorModel | None]:
+        """Every channel's submodel (None: measured), in channel order."""
+        return {c: self.model(c) for c in CHANNELS}
+
+    @property
+    def modelled(self) -> tuple[bool, bool, bool]:
+        """Which channels (drive, brake, steering) have a submodel."""
+        drive, brake, steering = (self.model(c) is not None for c in CHANNELS)
+        return drive, brake, steering
+
+    @property
+    def state_aware(self) -> bool:
+        return any(m.spec.state_aware for m in self.acts.values())
+
+    def specs(self) -> dict[str, str | None]:
+        return {c: (m.spec.name if m else None) for c, m in self.models().items()}
+
+    # ------------------------------------------------------------------ rollout
+    def rollout(
+        self,
+        cmds: np.ndarray | Tensor,
+        x0: Tensor,
+        y0: Tensor,
+        measured: Tensor | None = None,
+        states: tuple[Tensor, Tensor] | None = None,
+    ) -> ChainRollout:
+        """Batched rollout. cmds (B, T, 4) [gear, torque_cmd, decel_cmd, steer_cmd];
+        x0 (B, 2) [vx, yaw]; y0 (B, 3) actuals at k = 0; measured (B, T, 3) logged actuals
+        (needed for channels without a submodel). ``states`` (vx, yaw), each (B, T), feeds
+        state-aware submodels fixed states instead of the NSS's (the co-tuning surrogate);
+        the rollout is then decoupled."""
+        c_np = np.asarray(cmds.detach() if isinstance(cmds, Tensor) else cmds, np.float64)
+        y0 = torch.as_tensor(y0, dtype=torch.float64)
+        c = torch.as_tensor(clean_commands(self.envelope, c_np, y0[:, 2].numpy()))
+        if len(self.acts) < len(CHANNELS) and measured is None:
+            raise DataError("a chain with measured channels needs the measured actuals")
+        x0 = torch.as_tensor(x0, dtype=torch.float64)
+        if self.state_aware and states is None:
+            return self._interleaved(c, x0, y0, measured)
+        return self._decoupled(c, x0, y0, measured, states)
+
+    def _decoupled(self, c, x0, y0, measured, states=None) -> ChainRollout:
+        """Every submodel over the whole history, the output envelope, then the NSS."""
+        ys = []
+        for i, ch in enumerate(CHANNELS):
+            m = self.model(ch)
+            if m is None:
+                ys.append(measured[..., i])
+                continue
+            f = None
+            if m.spec.state_aware:
+                if states is None:
+                    raise DataError("state-aware submodels need states in a decoupled rollout")
+                f = torch_features(m.spec.features, states[0], states[1], c[..., 0])
+            ys.append(m.rollout(c[..., 1 + i], f, y0[:, i]))
+        ys = limit_outputs_torch(self.envelope, *ys, y0[:, 2], self.modelled)
+        u = torch.stack([c[..., 0], *ys], dim=-1)
+        return ChainRollout(u[..., 1:], self.nss.rollout(x0, u))
+
+    def _interleaved(self, c, x0, y0, measured) -> ChainRollout:
+        """Sample by sample: submodels read the NSS state x̂(k), the NSS advances on u(k)."""
+        nss = self.nss
+        integrate = nss.step_function()
+        dt_nss = nss.dtype
+        modelled = self.modelled
+        states = {
+            ch: m.init_state(c[:, 0, 1 + i], y0[:, i])
+            for i, ch in enumerate(CHANNELS)
+            if (m := self.model(ch)) is not None
+        }
+        vx, yaw = x0[:, 0], x0[:, 1]
+        steer_prev = y0[:, 2]
+        x = None
+        Xs, Us = [], []
+        for k in range(c.shape[1]):
+            g = c[:, k, 0]
+            ys = []
+            for i, ch in enumerate(CHANNELS):
+                m = self.model(ch)
+                if m is None:
+                    ys.append(measured[:, k, i])
+                    continue
+                f = torch_features(m.spec.features, vx, yaw, g) if m.spec.state_aware else None
+                y, states[ch] = m.step(states[ch], c[:, k, 1 + i], f)
+                ys.append(y)
+            ys = limit_outputs_torch(self.envelope, *ys, steer_prev, modelled)
+            steer_prev = ys[2]
+            u = torch.stack([g, *ys], dim=-1).to(dt_nss)
+            us = nss.scale_inputs(u)
+            if x is None:
+                x = nss.initial_state_scaled(x0.to(dt_nss), us)
+            Xs.append(x)
+            Us.append(u)
+            x = integrate(x, us)
+            vx = nss.vx_phys(x[:, 0]).to(torch.float64)
+            yaw = nss.yaw_phys(nss.reconstruct_yaw(x, us[:, I_STEER])[2]).to(torch.float64)
+        U = torch.stack(Us, dim=1)
+        r = nss.readout(torch.stack(Xs, dim=1), nss.scale_inputs(U))
+        return ChainRollout(U[..., 1:], r)

@@ -1,0 +1,236 @@
+"""``parknss study``: the evaluation studies one by one, each with its tables and figure.
+
+:func:`run_study` runs one of :data:`STUDIES` (``quick``: the smoke-test budget of
+configs/experiments.yaml) through the executor (``executor`` local or ray, ``workers``,
+``address``) with a result cache in ``<out>/cache``, so an interrupted study resumes; it
+writes ``<name>.json`` and the study's figure to ``out`` and returns a :class:`StudyRun`
+(the JSON document and the report tables; :func:`study_text` prints them). Studies that
+judge effects against the seed-noise floor take it from ``floor``: ``measure`` (run the
+seed-noise study, cached in the same folder), ``paper`` (the paper's CVs, labelled as
+such) or a seed-noise JSON written by ``parknss study seed-noise``. :func:`estimate`
+counts each study's fits and epochs and converts them to CPU hours with a measured
+paper-size seconds-per-epoch.
+
+Every study refuses, in one line, a campaign that lacks a channel NSS identification needs
+(:mod:`parknss.data.workflows`), and says in ``note`` when the campaign is not
+stratifiable and its folds are plain k-fold (:mod:`parknss.data.splits`).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from parknss.errors import ConfigError
+from parknss.experiments.results import Table
+
+STUDIES = ("learning-curve", "seed-noise", "ablations", "limiter", "convergence")
+
+
+def _quiet(msg: str) -> None:
+    pass
+
+
+def checked_campaign(data: Path | None, command: str):
+    """The study's campaign, refused (DataError, one line) if it lacks an NSS channel."""
+    from parknss.nss.campaigns import load_campaign
+
+    return load_campaign(data, "nss", command)
+
+
+def fold_note(name: str, campaign, cfg) -> tuple[bool, str]:
+    """(stratified, note) of the folds the study ``name`` fits on ``campaign``."""
+    if name == "learning-curve":
+        from parknss.experiments.learning_curve import grid_note
+
+        return grid_note(campaign, cfg.learning_curve_rs)
+    from parknss.data.splits import cv_plan
+
+    plan = cv_plan(campaign)
+    return plan.stratified, plan.note
+
+
+def _floor(spec: str, cfg, quick: bool, sweep, log: Callable[[str], None]):
+    from parknss.experiments.noise import NoiseFloor, seed_noise
+
+    if spec == "paper":
+        return NoiseFloor.paper(cfg)
+    if spec == "measure":
+        log("measuring the seed-noise floor (cached in the same folder)")
+        return seed_noise(cfg, quick, sweep).floor
+    return NoiseFloor.load(spec)
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyInputs:
+    """One study: its ``name`` (one of :data:`STUDIES`), the ``quick`` budget, the folder
+    ``out`` (and cache), the executor settings, the campaign ``data`` (None: default), the
+    experiments YAML ``config`` (None: shipped) and the noise ``floor`` spec."""
+
+    name: str
+    out: Path
+    quick: bool = False
+    executor: str = "local"
+    workers: int | None = None
+    address: str | None = None
+    data: Path | None = None
+    config: Path | None = None
+    floor: str = "measure"
+    progress: bool = True
+
+
+@dataclass
+class StudyRun:
+    """A finished study: the JSON document written to ``<name>.json`` and its report
+    tables."""
+
+    doc: dict
+    tables: list[Table]
+
+
+def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> StudyRun:
+    """Run one study; write its JSON and figure to ``out`` (see the module doc)."""
+    from parknss.experiments import findings as fnd
+    from parknss.experiments import study_tables as st
+    from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.sweep import Sweep
+    from parknss.report import study_figures as fig
+
+    name, quick, out, data = inputs.name, inputs.quick, inputs.out, inputs.data
+    if name not in STUDIES:
+        raise ConfigError(f"unknown study {name!r}; one of {', '.join(STUDIES)}")
+    cfg = load_experiments_config(inputs.config)
+    stratified, note = fold_note(name, checked_campaign(data, f"parknss study {name}"), cfg)
+    if inputs.progress:
+        log(note)
+    out.mkdir(parents=True, exist_ok=True)
+    sweep = Sweep(inputs.executor, inputs.workers, inputs.address, out / "cache",
+                  str(data) if data else None, inputs.progress)
+    floor = inputs.floor
+    t0 = time.perf_counter()
+    if name == "learning-curve":
+        from parknss.experiments.learning_curve import learning_curve
+
+        res = learning_curve(cfg, quick, sweep)
+        tables, found = st.learning_curve_tables(res), fnd.learning_curve_findings(res)
+        figure = fig.draw_learning_curve(res, out / "learning_curve.png")
+    elif name == "seed-noise":
+        from parknss.experiments.noise import seed_noise
+
+        res = seed_noise(cfg, quick, sweep)
+        tables, found = st.seed_noise_tables(res), fnd.seed_noise_findings(res)
+        figure = fig.draw_seed_noise(res, out / "seed_noise.png")
+    elif name == "ablations":
+        from parknss.experiments.ablations import ablations
+
+        res = ablations(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
+        tables, found = st.ablation_tables(res), fnd.ablation_findings(res)
+        figure = fig.draw_ablations(res, out / "table3_effects.png")
+    elif name == "limiter":
+        from parknss.experiments.limiter_study import limiter_study
+
+        res = limiter_study(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
+        tables, found = st.limiter_tables(res), fnd.limiter_findings(res)
+        figure = fig.draw_limiter(res, out / "limiter.png")
+    else:
+        from parknss.experiments.convergence import convergence
+        from parknss.report.nss_figures import draw_history
+
+        res = convergence(cfg, quick, sweep)
+        tables, found = st.convergence_tables(res), []
+        figure = draw_history(
+            res.epochs,
+            res.raw,
+            res.smooth,
+            out / "fig4_convergence.png",
+            res.output,
+            res.best_epoch,
+        )
+    doc = {
+        "study": name,
+        "quick": quick,
+        "executor": inputs.executor,
+        "wall_s": round(time.perf_counter() - t0, 2),
+        "result": res.to_json(),
+        "findings": [
+            {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
+        ],
+        "figure": str(figure),
+        "config": cfg.model_dump(mode="json"),
+        "stratified": stratified,
+        "note": note,
+    }
+    path = out / f"{name}.json"
+    path.write_text(json.dumps(doc, indent=2, default=str))
+    doc["json"] = str(path)
+    return StudyRun(doc, tables)
+
+
+def study_text(run: StudyRun) -> str:
+    """What ``parknss study`` prints: the note (plain k-fold), the tables, the findings."""
+    from parknss.experiments.study_tables import text_table
+
+    doc = run.doc
+    parts = [doc["note"] + "\n"] if not doc["stratified"] else []
+    parts += [text_table(t) + "\n" for t in run.tables]
+    parts += [f"[{f['verdict']}] {f['claim']}\n    measured: {f['measured']}"
+              for f in doc["findings"]]
+    parts.append(f"wall {doc['wall_s']} s; wrote {doc['json']}, {doc['figure']}")
+    return "\n".join(parts)
+
+
+def estimate(
+    quick: bool, config: Path | None, data: Path | None, sec_per_epoch: float | None,
+    log: Callable[[str], None] = _quiet,
+) -> tuple[float, list[dict]]:
+    """(CPU s/epoch, per study: fits, epochs, CPU hours) at the budget (paper-size CPU
+    s/epoch, measured by a 5-epoch fit unless given; Euler on the fused engine: the eager
+    integrator options of Table III cost several times more per epoch)."""
+    from parknss.experiments.ablations import n_fits
+    from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.sweep import Sweep
+
+    cfg = load_experiments_config(config)
+    checked_campaign(data, "parknss study estimate")
+    b = cfg.budget(quick)
+    if sec_per_epoch is None:
+        from parknss.experiments.folds import fold_job
+
+        def cpu_of(epochs: int) -> float:
+            ov = {**b.overrides, "train": {**b.overrides.get("train", {}), "epochs": epochs}}
+            cpu0 = time.process_time()
+            fold_job("cv", 0, data=str(data) if data else None, overrides=ov)
+            return time.process_time() - cpu0
+
+        n = 6
+        log(f"timing paper-size fits of 1 and {n} epochs (process CPU time) ...")
+        # CPU time, not wall (on a shared machine the wall clock measures the neighbours);
+        # the difference removes loading and the epoch-1 validation; n - 1 = 5 epochs add
+        # one validation, the val_every = 5 rate. A first fit warms up (imports, scripting).
+        cpu_of(1)
+        short = cpu_of(1)
+        sec_per_epoch = (cpu_of(n) - short) / (n - 1)
+    sweep = Sweep(data=str(data) if data else None, progress=False)
+    rows = [
+        ("seed-noise", len(b.seeds), b.epochs),
+        ("learning-curve", len(cfg.learning_curve_rs) * len(b.folds), b.epochs),
+        ("ablations", n_fits(cfg, quick, sweep), b.epochs),
+        ("limiter", len(b.folds), b.epochs),
+        ("convergence", 1, b.convergence_epochs),
+        ("table2 (nss + direct yaw)", 8, b.convergence_epochs),
+    ]
+    return sec_per_epoch, [
+        {"study": s, "fits": f, "epochs": e, "cpu_h": f * e * sec_per_epoch / 3600.0}
+        for s, f, e in rows
+    ]
+
+
+def estimate_text(sec_per_epoch: float, rows: list[dict]) -> str:
+    """The :func:`estimate` table: fits, epochs and CPU hours per study, and the total."""
+    lines = [f"{'study':<28}{'fits':>6}{'epochs':>8}{'CPU h':>9}   ({sec_per_epoch:.2f} s/epoch)"]
+    lines += [f"{r['study']:<28}{r['fits']:>6}{r['epochs']:>8}{r['cpu_h']:>9.1f}" for r in rows]
+    lines.append(f"{'total':<28}{'':>14}{sum(r['cpu_h'] for r in rows):>9.1f}")
+    return "\n".join(lines)
