@@ -1,12 +1,15 @@
 """Benchmark: generate the synthetic campaign and print the figures issue 2 asks for.
 
-    python benchmarks/bench_campaign.py [--seed N] [--vehicle YAML] [--json]
+    python benchmarks/bench_campaign.py [--seed N] [--vehicle YAML]
+        [--conditions none|typical|harsh] [--repeat N] [--json]
 
 Times generate_campaign (16 trials), then reports per trial the class, length, direction
 changes, blind-zone fraction and max |vx|; and for the campaign the R² of the
 kinematic-bicycle yaw rate (constant ratio, logged vx and steer, moving region) against
 the logged yaw rate, the least-squares steering ratio, the total direction changes and
 whether every reversal happened at standstill. Independent of parknss.data.describe.
+``--conditions`` draws per-trial conditions of that profile (default: the YAML's);
+``--repeat N`` times the generation N times and reports the fastest and the median.
 """
 
 from __future__ import annotations
@@ -61,10 +64,13 @@ def yaw_checks(campaign, geom: VehicleGeometry) -> tuple[float, float]:
     return float(r2), float(fit.x)
 
 
-def run(seed: int, vehicle: Path | None) -> dict:
-    t0 = time.perf_counter()
-    campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle)
-    elapsed = time.perf_counter() - t0
+def run(seed: int, vehicle: Path | None, conditions: str | None = None, repeat: int = 1) -> dict:
+    times = []
+    for _ in range(max(repeat, 1)):
+        t0 = time.perf_counter()
+        campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle, conditions=conditions)
+        times.append(time.perf_counter() - t0)
+    elapsed = min(times)
     geom = VehicleGeometry.from_dict(campaign.meta["vehicle_geometry"])
     r2, ratio = yaw_checks(campaign, geom)
     trials = [
@@ -82,7 +88,10 @@ def run(seed: int, vehicle: Path | None) -> dict:
     return {
         "seed": seed,
         "vehicle": str(vehicle) if vehicle else "defaults",
+        "conditions": campaign.meta.get("conditions_profile", "none"),
         "generation_s": round(elapsed, 2),
+        "generation_median_s": round(float(np.median(times)), 2),
+        "repeats": len(times),
         "trials": trials,
         "yaw_r2": round(r2, 4),
         "steer_ratio_fit": round(ratio, 3),
@@ -94,7 +103,11 @@ def run(seed: int, vehicle: Path | None) -> dict:
 
 
 def print_table(res: dict) -> None:
-    print(f"vehicle {res['vehicle']}, seed {res['seed']}: generated in {res['generation_s']} s")
+    print(
+        f"vehicle {res['vehicle']}, seed {res['seed']}, conditions {res['conditions']}: "
+        f"generated in {res['generation_s']} s (median {res['generation_median_s']} s "
+        f"of {res['repeats']})"
+    )
     print(f"{'trial':20s} {'length s':>8s} {'dir.ch.':>7s} {'blind':>6s} {'max km/h':>8s}")
     for t in res["trials"]:
         print(
@@ -113,9 +126,16 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--vehicle", type=Path, default=None, help="reference-vehicle YAML")
+    ap.add_argument(
+        "--conditions",
+        choices=("none", "typical", "harsh"),
+        default=None,
+        help="per-trial conditions profile (default: the vehicle YAML's)",
+    )
+    ap.add_argument("--repeat", type=int, default=1, help="time the generation N times")
     ap.add_argument("--json", action="store_true", help="print one JSON document")
     args = ap.parse_args(argv)
-    res = run(args.seed, args.vehicle)
+    res = run(args.seed, args.vehicle, args.conditions, args.repeat)
     if args.json:
         print(json.dumps(res, indent=2))
     else:

@@ -148,3 +148,88 @@ def test_the_layer_test_sees_a_violation(tmp_path):
     assert table["errors"] < table["data"] < table["nss"] < table["commands"]
     found = {mod for p in sources() for mod, _ in imports(p)}
     assert "parknss.errors" in found and len(found) > 50
+
+
+# --- the tests mirror the package -----------------------------------------------------------
+
+TESTS = ROOT / "tests"
+HELPERS = TESTS / "helpers"  # the shared builders (a package on pytest's pythonpath)
+
+
+def tree_files() -> list[Path]:
+    """Every .py file under tests/ (test modules, conftests, helpers)."""
+    return sorted(p for p in TESTS.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _is_package(folder: Path) -> bool:
+    """A folder of Python modules (configs/, models/, web/static/ are package data)."""
+    return folder.is_dir() and any(folder.glob("*.py"))
+
+
+def test_every_test_file_lives_beside_what_it_tests():
+    """tests/ mirrors src/parknss/: a test file is in tests/<unit>[/<sub>]/ where
+    src/parknss/<unit>[/<sub>]/ is a package, or at the top level (a top-level module's
+    tests, or cross-cutting ones; not named after a package); helpers/ holds no tests;
+    nothing else but conftest.py files and the helpers."""
+    files = tree_files()
+    bad = []
+    for p in files:
+        rel = p.relative_to(TESTS)
+        if rel.parts[0] == HELPERS.name:
+            if p.name.startswith("test_"):
+                bad.append(f"{rel}: a test module among the helpers")
+            continue
+        if not (p.name.startswith("test_") or p.name == "conftest.py"):
+            bad.append(f"{rel}: neither a test module nor a conftest (shared code: helpers/)")
+        folder = rel.parent
+        if folder.parts and not _is_package(SRC / folder):
+            bad.append(f"{rel}: src/parknss/{folder.as_posix()}/ is not a package")
+        named = p.stem.removeprefix("test_").split("_")[0]
+        if not folder.parts and _is_package(SRC / named):
+            bad.append(f"{rel}: tests of the {named}/ package belong in tests/{named}/")
+    assert not bad, "misplaced test files:\n" + "\n".join(bad)
+    # not vacuous: most tests are in unit folders, some at the top level
+    tests = [p for p in files if p.name.startswith("test_")]
+    nested = [p for p in tests if p.parent != TESTS]
+    assert len(tests) > 50 and len(nested) > len(tests) / 2 and len(nested) < len(tests)
+
+
+def _imported_modules(path: Path) -> list[tuple[str, int]]:
+    """(module, line) of every import in a file (function bodies too); relative imports
+    are given with their leading dots."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            out += [(a.name, node.lineno) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            mod = "." * node.level + (node.module or "")
+            out += [(f"{mod}.{a.name}" if node.level and not node.module else mod, node.lineno)
+                    for a in node.names]
+    return out
+
+
+def test_no_test_module_imports_another():
+    """Test modules, conftests and helpers import parknss, third-party code and ``helpers``,
+    never a test module or a conftest (shared builders live in helpers/, shared fixtures in
+    conftest.py)."""
+    bad = []
+    for p in tree_files():
+        in_helpers = p.is_relative_to(HELPERS)
+        for mod, line in _imported_modules(p):
+            parts = mod.lstrip(".").split(".")
+            test_like = any(x.startswith("test_") or x == "conftest" for x in parts)
+            relative = mod.startswith(".") and not in_helpers
+            if test_like or relative or parts[0] == "tests":
+                bad.append(f"{p.relative_to(ROOT)}:{line}: imports {mod}")
+    assert not bad, "test modules importing test modules:\n" + "\n".join(bad)
+
+
+def test_the_test_layout_checks_see_a_violation(tmp_path):
+    """The import check is not vacuous: it finds the imports of a file like the old ones."""
+    old = tmp_path / "test_old.py"
+    old.write_text("from test_nss_synth import make_campaign\n\n\ndef f():\n"
+                   "    import actuators_tiny, conftest\n")
+    assert [m for m, _ in _imported_modules(old)] == ["test_nss_synth", "actuators_tiny",
+                                                       "conftest"]
+    assert {m for p in tree_files() for m, _ in _imported_modules(p)} >= {
+        "helpers.synth", "parknss.cli"}

@@ -7,10 +7,10 @@ import json
 
 import pytest
 
+from helpers.synth import make_campaign
 from parknss.cli import main
 from parknss.data.io import read_campaign, write_campaign, write_trial_csv
 from parknss.data.trial import Campaign
-from test_nss_synth import make_campaign
 
 
 def _one_error(capsys) -> str:

@@ -4,7 +4,7 @@
 called, validated when a spec is parsed); :data:`CANDIDATES` maps every one of those names
 to the class that implements it. The class carries everything else an architecture needs:
 its NumPy real-time twin (``stepper_cls``) and its fitting budget (``fit_family``), so
-there is no second lookup table anywhere (tests/test_actuators_models.py checks that the
+there is no second lookup table anywhere (tests/actuators/test_models.py checks that the
 vocabulary and this table agree).
 """
 

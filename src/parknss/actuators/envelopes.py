@@ -21,7 +21,7 @@ written once: :func:`clean_commands` (input side, NumPy histories) and
 :func:`limit_outputs_torch` (output side, torch, a whole history or one sample, used by
 fitting, the chain's decoupled and interleaved rollouts alike). :class:`EnvelopeState` is
 their real-time twin, one sample per call in plain floats with activity counters; it is
-tested against both (tests/test_actuators_envelopes.py).
+tested against both (tests/actuators/test_envelopes.py).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ features) to the channel's actual, in physical units:
   loop when submodels read NSS-predicted states);
 * ``stepper()``: a NumPy float64 real-time twin with a ring buffer
   (:mod:`parknss.actuators.steppers`; each class names its twin in ``stepper_cls``),
-  equal to ``rollout`` to rounding (tests/test_actuators_models.py).
+  equal to ``rollout`` to rounding (tests/actuators/test_models.py).
 
 The architectures are implemented in :mod:`parknss.actuators.lags` and
 :mod:`parknss.actuators.neural`; :mod:`parknss.actuators.candidates` holds the one table

@@ -6,7 +6,7 @@ fitted candidate's parameters into plain float64 arrays and returns a :class:`St
 ``step(c, f) -> y`` (command float, features (F,) array or None; returns the actual in
 physical units). The arithmetic is the candidate's ``step`` written in NumPy (perceptrons
 through :func:`parknss.nss.nets.numpy_tanh_mlp`), so a whole-trial replay equals
-``rollout`` to rounding (tests/test_actuators_models.py, every architecture and variant).
+``rollout`` to rounding (tests/actuators/test_models.py, every architecture and variant).
 No torch in the loop: a sample costs microseconds.
 """
 

@@ -5,9 +5,9 @@
 three actuator steppers (:mod:`parknss.actuators.steppers`), the output envelope
 (:class:`parknss.actuators.envelopes.EnvelopeState`) and the NSS together with exactly the
 arithmetic of :meth:`parknss.chain.model.Chain.rollout`, so the two agree to rounding over
-whole trials (tests/test_chain.py asserts 1e-10 in float64). :class:`NumpyNSS` is tested
+whole trials (tests/chain/test_chain.py asserts 1e-10 in float64). :class:`NumpyNSS` is tested
 on its own against :meth:`parknss.nss.model.NSSModel.step`, the one source of the NSS's
-Euler step and yaw readout (tests/test_chain.py).
+Euler step and yaw readout (tests/chain/test_chain.py).
 
 Timing of one call ``step(gear, torque_cmd, decel_cmd, steer_cmd)`` at sample k: the
 features of sample k are read from the NSS state x̂(k); the submodels give the actuals

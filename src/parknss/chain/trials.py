@@ -86,7 +86,7 @@ def chain_predictions(chain: Chain, trials: Iterable[Trial]) -> Predictions:
     """{trial_id: {"vx", "yaw_rate", "ax", "ay", "torque", "brake_pressure", "steer"}}.
 
     A chain with state-aware submodels in float64 is evaluated by the real-time twin
-    (equal to the torch rollout to rounding, tests/test_chain.py), else by the batched
+    (equal to the torch rollout to rounding, tests/chain/test_chain.py), else by the batched
     torch rollout."""
     trials = list(trials)
     if chain.state_aware and chain.nss.dtype == torch.float64:

@@ -1,7 +1,8 @@
 """``parknss actuators``: study, ladder, build, stress (paper §III, §V-E, Table IV).
 
 * ``study``: Phase A and Phase B tables, co-tuning on the split, Fig. 6 and Fig. 3;
-  writes study.json, selection.json and the figures to --out
+  writes study.json, selection.json and the figures to the run folder --out (refused if
+  it holds anything but the same study unless --overwrite)
   (:func:`parknss.experiments.actuator_study.run_actuator_study`). The Phase A fits run
   through the one executor: ``--executor local|ray``, ``--workers``, ``--address``.
 * ``ladder``: Table IV on every trial (all measured; the assembly with the signal-fitted
@@ -54,6 +55,7 @@ def register(app: typer.Typer) -> None:
         executor: str = typer.Option("local", "--executor", help="local | ray"),
         workers: int = typer.Option(1, "--workers", help="Parallel Phase A fits."),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address."),
+        overwrite: bool = typer.Option(False, "--overwrite", help="Replace what --out holds."),
         as_json: bool = json_opt,
     ) -> None:
         """Phase A/B tables, co-tuning on the split, Fig. 6 and Fig. 3."""
@@ -65,7 +67,7 @@ def register(app: typer.Typer) -> None:
         )
 
         inputs = StudyInputs(out=out, nss=nss, data=data, config=config,
-                             fanout=Fanout(executor, workers, address))
+                             fanout=Fanout(executor, workers, address), overwrite=overwrite)
         _emit(run_actuator_study(inputs, _log), as_json, study_text)
 
     @sub.command("ladder")

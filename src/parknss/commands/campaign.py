@@ -7,11 +7,20 @@ holds anything already unless ``--overwrite`` (:mod:`parknss.outputs`).
 from __future__ import annotations
 
 import json
+from enum import StrEnum
 from pathlib import Path
 
 import typer
 
 OVERWRITE_HELP = "Replace an existing campaign (or other content) at --out."
+
+
+class Condition(StrEnum):
+    """Per-trial conditions profiles of the reference vehicle (docs/reference.md)."""
+
+    none = "none"
+    typical = "typical"
+    harsh = "harsh"
 
 
 def register(app: typer.Typer) -> None:
@@ -24,6 +33,9 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Folder to write the campaign to."),
         seed: int = typer.Option(0, "--seed", help="Seed of the repetition perturbations."),
         vehicle: Path | None = typer.Option(None, "--vehicle", help="Reference-vehicle YAML."),
+        conditions: Condition | None = typer.Option(
+            None, "--conditions", help="Per-trial conditions profile (default: the YAML's)."
+        ),
         overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     ) -> None:
         """Drive the synthetic reference vehicle through the paper's 16-trial campaign."""
@@ -32,7 +44,8 @@ def register(app: typer.Typer) -> None:
         from parknss.reference.campaign import generate_campaign
 
         check_writable(out, overwrite=overwrite, kind="campaign")
-        campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle, progress=True)
+        extra = {} if conditions is None else {"conditions": conditions.value}
+        campaign = generate_campaign(seed=seed, vehicle_yaml=vehicle, progress=True, **extra)
         write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"wrote {len(campaign)} trials to {out}", err=True)
 
@@ -44,12 +57,14 @@ def register(app: typer.Typer) -> None:
         """Per-trial summary and campaign-level physics checks."""
         from parknss.data.describe import describe_campaign
         from parknss.data.io import read_campaign
+        from parknss.reference.conditions import conditions_rows, conditions_summary
 
-        summary = describe_campaign(read_campaign(path))
+        campaign = read_campaign(path)
+        summary, conds = describe_campaign(campaign), conditions_summary(campaign)
         if as_json:
-            typer.echo(json.dumps(summary.to_json(), indent=2))
+            typer.echo(json.dumps({**summary.to_json(), "conditions": conds}, indent=2))
         else:
-            typer.echo(summary.table())
+            typer.echo("\n".join([summary.table(), *conditions_rows(conds)]))
 
     @sub.command("import")
     def import_(

@@ -2,7 +2,8 @@
 
 Describes the campaign, evaluates and rates the shipped NSS and chain, parks one grid cell
 through the kinematic plant and the learned chain, and writes every figure and
-``summary.json`` to ``--out`` (:func:`parknss.experiments.demo.run_demo`).
+``summary.json`` to ``--out`` (:func:`parknss.experiments.demo.run_demo`), a run folder
+refused if it holds anything but the same demo unless ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -28,11 +29,15 @@ def register(app: typer.Typer) -> None:
         cell: int = typer.Option(26, "--cell", help="Grid cell (0-35) to park in closed loop."),
         nss: Path = typer.Option(SHIPPED_NSS, "--nss", help="NSS model folder."),
         chain: Path = typer.Option(SHIPPED_CHAIN, "--chain", help="Chain artefact folder."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+        ),
     ) -> None:
         """Describe the campaign, evaluate and rate the shipped plant, park through it."""
         from parknss.experiments.demo import DemoInputs, run_demo, summary_text
 
-        inputs = DemoInputs(out=out, data=data, cell=cell, nss=nss, chain=chain)
+        inputs = DemoInputs(out=out, data=data, cell=cell, nss=nss, chain=chain,
+                            overwrite=overwrite)
         doc = run_demo(inputs, _log, typer.echo)
         typer.echo(summary_text(doc))
         _log(f"done in {doc['wall_s']} s: artefacts in {out} (summary.json, PNG figures)")

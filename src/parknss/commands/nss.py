@@ -11,7 +11,9 @@
   (:func:`parknss.experiments.evaluate.evaluate_open_loop`).
 
 Config: ``--config YAML`` (default: the shipped configs/nss.yaml, the paper's values) plus
-``--epochs``, ``--seed`` and any ``--set section.field=value``.
+``--epochs``, ``--seed`` and any ``--set section.field=value``. ``--out`` is a run folder:
+the same command with the same arguments resumes it (``cv``: from its fold cache), one
+holding anything else is refused unless ``--overwrite`` (:func:`parknss.outputs.run_folder`).
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ def register(app: typer.Typer) -> None:
     seed_opt = typer.Option(None, "--seed", help="Override train.seed.")
     set_opt = typer.Option(None, "--set", help="section.field=value (repeatable).")
     json_opt = typer.Option(False, "--json", help="Print one JSON document.")
+    over_opt = typer.Option(
+        False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+    )
 
     @app.command("cv")
     def cv(
@@ -52,7 +57,7 @@ def register(app: typer.Typer) -> None:
         workers: int | None = typer.Option(None, "--workers", help="Parallel workers."),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address."),
         out: Path = typer.Option(Path("runs/cv"), "--out", help="Run folder."),
-        as_json: bool = json_opt,
+        overwrite: bool = over_opt, as_json: bool = json_opt,
     ) -> None:
         """Table II: stratified 4-fold CV of the NSS and two baselines on the same folds
         (plain 4-fold, with a note, when the campaign is not stratifiable)."""
@@ -62,7 +67,8 @@ def register(app: typer.Typer) -> None:
         names = tuple(v.strip() for v in variants.split(",") if v.strip())
         inputs = CVInputs(out=out, data=data, config=config,
                           overrides=cli_overrides(set_, epochs, seed), variants=names,
-                          executor=executor, workers=workers, address=address)
+                          executor=executor, workers=workers, address=address,
+                          overwrite=overwrite)
         res, doc = table2(inputs, _log)
         _emit(doc, as_json, res.table())
 
@@ -100,11 +106,11 @@ def register(app: typer.Typer) -> None:
         data: Path | None = data_opt,
         limiter: bool = typer.Option(False, "--limiter", help="Apply the inference limiter."),
         out: Path = typer.Option(Path("runs/evaluate"), "--out", help="Run folder."),
-        as_json: bool = json_opt,
+        overwrite: bool = over_opt, as_json: bool = json_opt,
     ) -> None:
         """Open-loop errors of a model over whole trials (Fig. 5 for two maneuvers)."""
         from parknss.experiments.evaluate import EvaluateInputs, evaluate_open_loop
 
         doc, text = evaluate_open_loop(EvaluateInputs(out=out, model=model, chain=chain, data=data,
-                                                         limiter=limiter))
+                                                      limiter=limiter, overwrite=overwrite))
         _emit(doc, as_json, text)

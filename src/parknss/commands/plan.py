@@ -7,7 +7,9 @@ margin), draws it to a PNG and prints a summary (or one JSON object). ``--no-res
 plans as the planner alone instead (full steering lock, planning.yaml's margin): a plan
 that no other command drives. ``parknss plan --grid 36`` (``12``: the tuning core,
 ``252``: the robustness grid) plans every cell through the one executor and prints a
-table (or one JSON list).
+table (or one JSON list). The figure goes to ``--out`` (default ``runs/plan/<scene>``), a
+run folder refused if it holds anything but the same plan unless ``--overwrite``
+(:mod:`parknss.experiments.scenes`).
 """
 
 from __future__ import annotations
@@ -35,6 +37,9 @@ def register(app: typer.Typer) -> None:
         ),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON document."),
         out: Path | None = typer.Option(None, "--out", help="Folder for figures and JSON."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+        ),
         workers: int = typer.Option(1, "--workers", help="Parallel workers for --grid."),
         executor: str = typer.Option("local", "--executor", help="local (loky pool) or ray."),
         address: str | None = typer.Option(None, "--address", help="Ray cluster address."),
@@ -58,35 +63,22 @@ def register(app: typer.Typer) -> None:
             raise PlanningError("give exactly one of --scene FILE|CELL or --grid 36|12|252")
         files = SimConfigFiles(closed_loop_config, None, config, scenarios_config)
         overrides = NO_RESERVE if no_reserve else None
-        settings = {"refine": not no_refine, "closed_loop_overrides": overrides}
+        settings = {"refine": not no_refine, "closed_loop_overrides": overrides,
+                    "out": out, "overwrite": overwrite}
         if scene is not None:
-            _plan_one(scene, files, settings, as_json, out)
+            from parknss.experiments.scenes import plan_one
+
+            summary = plan_one(scene, files, **settings)
+            _log(f"drew {summary['figure']}")
+            if as_json:
+                return typer.echo(json.dumps(summary, indent=2))
+            for key, value in summary.items():
+                typer.echo(f"{key:>24}: {value}")
             return
-        from parknss.sim.planner import plan_grid, plan_grid_table
+        from parknss.experiments.scenes import plan_grid_run
+        from parknss.sim.planner import plan_grid_table
 
-        rows = plan_grid(
-            grid, files=files, executor=executor, workers=workers, address=address, **settings
+        rows = plan_grid_run(
+            grid, files, executor=executor, workers=workers, address=address, **settings
         )
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            (out / f"plan_grid_{grid}.json").write_text(json.dumps(rows, indent=2))
         typer.echo(json.dumps(rows, indent=2) if as_json else plan_grid_table(rows))
-
-
-def _plan_one(spec: str, files, settings: dict, as_json: bool, out: Path | None) -> None:
-    from parknss.report.plan_figure import draw_plan
-    from parknss.sim.planner import plan_named_scene
-
-    scene, plan = plan_named_scene(spec, files, **settings)
-    summary = plan.to_json(scene)
-    folder = out or Path("runs/plan")
-    png = folder / f"plan_{scene.meta.name}.png"
-    summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse, refined=plan.refinement))
-    if out is not None:
-        (out / f"plan_{scene.meta.name}.json").write_text(json.dumps(summary, indent=2))
-    _log(f"drew {summary['figure']}")
-    if as_json:
-        typer.echo(json.dumps(summary, indent=2))
-    else:
-        for key, value in summary.items():
-            typer.echo(f"{key:>24}: {value}")

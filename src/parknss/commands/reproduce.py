@@ -1,5 +1,7 @@
 """``parknss reproduce``: run the paper's tables and figures and write an HTML report
-(:func:`parknss.experiments.reproduce.reproduce`)."""
+(:func:`parknss.experiments.reproduce.reproduce`) into a run folder that the same
+artefacts and budget resume (cache) and that is refused, holding anything else, unless
+``--overwrite``."""
 
 from __future__ import annotations
 
@@ -23,6 +25,9 @@ def register(app: typer.Typer) -> None:
         config: Path | None = typer.Option(
             None, "--config", help="Studies YAML (default configs/experiments.yaml)."
         ),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+        ),
         as_json: bool = typer.Option(False, "--json", help="Print the run summary as JSON."),
     ) -> None:
         """Reproduce the paper's tables and figures (on the synthetic campaign by default)."""
@@ -33,6 +38,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(artefact_list())
             return
         inputs = ReproduceInputs(name=name, quick=quick, executor=executor, workers=workers,
-                                 address=address, data=data, out=out, config=config)
+                                 address=address, data=data, out=out, config=config,
+                                 overwrite=overwrite)
         summary = run(inputs, lambda msg: typer.echo(msg, err=True))
         typer.echo(json.dumps(summary, indent=2) if as_json else f"report: {summary['report']}")

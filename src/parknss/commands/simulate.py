@@ -1,6 +1,8 @@
-"""``parknss simulate`` (one scene, Figs. 8/9: :mod:`parknss.sim.session`), ``grid``
+"""``parknss simulate`` (one scene, Figs. 8/9: :mod:`parknss.experiments.scenes`), ``grid``
 (Table V: :mod:`parknss.sim.grid`) and ``tune`` (interface gains: :mod:`parknss.sim.tuning`);
-grid and tune fan out through the one executor (``--executor local|ray``)."""
+grid and tune fan out through the one executor (``--executor local|ray``). Each writes a
+run folder (``--out``) refused if it holds anything but the same run unless
+``--overwrite`` (:func:`parknss.outputs.run_folder`)."""
 
 from __future__ import annotations
 
@@ -21,29 +23,15 @@ EXECUTOR = typer.Option("local", "--executor", help="local (loky pool) or ray.")
 ADDRESS = typer.Option(None, "--address", help="Ray cluster address (--executor ray).")
 WORKERS = typer.Option(1, "--workers", help="Parallel workers.")
 JSON = typer.Option(False, "--json", help="Print one JSON document.")
+OVERWRITE = typer.Option(
+    False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+)
 
 
 def _files(*paths: Path | None) -> SimConfigFiles:
     from parknss.sim.closed_loop import SimConfigFiles
 
     return SimConfigFiles(*paths)
-
-
-def _simulate_scene(
-    spec: str, plants: list[str], out: Path, files: SimConfigFiles | None = None, series=False
-) -> dict:
-    """Plan and drive one scene, draw Figs. 8/9 (and the series CSVs); the JSON summary."""
-    from parknss.report.sim_figures import draw_scene_run
-    from parknss.sim.session import simulate_scene as simulate
-
-    run = simulate(spec, plants, files)
-    doc = run.to_json()
-    figures = draw_scene_run(run, out)
-    if figures:
-        doc["figures"] = figures
-        if series:
-            doc["series"] = run.write_series(out)
-    return doc
 
 
 def register(app: typer.Typer) -> None:
@@ -55,7 +43,10 @@ def register(app: typer.Typer) -> None:
             None, "--compare", help="Plants on the same plan, e.g. kinematic,reference."
         ),
         as_json: bool = JSON,
-        out: Path = typer.Option(Path("runs/simulate"), "--out", help="Figures folder."),
+        out: Path | None = typer.Option(
+            None, "--out", help="Run folder (default runs/simulate/<scene>)."
+        ),
+        overwrite: bool = OVERWRITE,
         series: bool = typer.Option(False, "--series", help="Also write time-series CSVs."),
         config: Path | None = CONFIG,
         interface: Path | None = INTERFACE,
@@ -63,15 +54,13 @@ def register(app: typer.Typer) -> None:
         scenarios_config: Path | None = SCENARIOS,
     ) -> None:
         """Execute one planned scene in closed loop; draw Fig. 8 and Fig. 9."""
+        from parknss.experiments.scenes import simulate_one
         from parknss.sim.plants import parse_plants
+        from parknss.sim.session import summary_text
 
         plants = parse_plants(plant if compare is None else f"{plant},{compare}")
         files = _files(config, interface, planning_config, scenarios_config)
-        doc = _simulate_scene(scene, plants, out, files, series)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / f"simulate_{doc['scene']}.json").write_text(json.dumps(doc, indent=2))
-        from parknss.sim.session import summary_text
-
+        doc = simulate_one(scene, plants, files, out=out, series=series, overwrite=overwrite)
         typer.echo(json.dumps(doc, indent=2) if as_json else summary_text(doc))
 
     @app.command("grid")
@@ -84,6 +73,7 @@ def register(app: typer.Typer) -> None:
         address: str | None = ADDRESS,
         as_json: bool = JSON,
         out: Path = typer.Option(Path("runs/grid"), "--out", help="CSV/JSON folder."),
+        overwrite: bool = OVERWRITE,
         config: Path | None = CONFIG,
         interface: Path | None = INTERFACE,
         planning_config: Path | None = PLANNING,
@@ -96,7 +86,7 @@ def register(app: typer.Typer) -> None:
         files = _files(config, interface, planning_config, scenarios_config)
         doc = run_grid_report(
             grid, parse_plants(plants), out, cells=cells, files=files,
-            executor=executor, workers=workers, address=address,
+            executor=executor, workers=workers, address=address, overwrite=overwrite,
         )  # fmt: skip
         if as_json:
             return typer.echo(json.dumps(doc, indent=2))
@@ -115,6 +105,7 @@ def register(app: typer.Typer) -> None:
         rounds: int | None = typer.Option(None, "--rounds", help="Descent rounds."),
         as_json: bool = JSON,
         out: Path = typer.Option(Path("runs/tune"), "--out", help="Output folder."),
+        overwrite: bool = OVERWRITE,
         config: Path | None = CONFIG,
         interface: Path | None = INTERFACE,
         planning_config: Path | None = PLANNING,
@@ -127,6 +118,7 @@ def register(app: typer.Typer) -> None:
         doc = tune_gains(
             plant, out, rounds=rounds, files=files, executor=executor, workers=workers,
             address=address, log=lambda m: typer.echo(f"[sim] {m}", err=True),
+            overwrite=overwrite,
         )  # fmt: skip
         if as_json:
             return typer.echo(json.dumps(doc, indent=2))

@@ -3,9 +3,12 @@
 ``parknss study learning-curve|seed-noise|ablations|limiter|convergence`` runs one study
 (``--quick``: the smoke-test budget of configs/experiments.yaml) through the executor
 (``--executor local|ray``, ``--workers``, ``--address``) with a result cache in
-``<out>/cache`` (:func:`parknss.experiments.studies.run_study`); ``--floor`` names the
-seed-noise floor (``measure``, ``paper`` or a seed-noise JSON). ``parknss study estimate``
-counts each study's fits and epochs and converts them to CPU hours.
+``<out>/cache`` that every study run into the same ``--out`` with the same budget,
+campaign, configs and floor shares and resumes; an ``--out`` holding anything else is
+refused unless ``--overwrite`` (:func:`parknss.experiments.studies.run_study`);
+``--floor`` names the seed-noise floor (``measure``, ``paper`` or a seed-noise JSON).
+``parknss study estimate`` counts each study's fits and epochs and converts them to CPU
+hours.
 """
 
 from __future__ import annotations
@@ -45,6 +48,9 @@ def register(app: typer.Typer) -> None:
             floor: str = typer.Option(
                 "measure", "--floor", help="Noise floor: measure | paper | seed-noise JSON."
             ),
+            overwrite: bool = typer.Option(
+                False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
+            ),
             as_json: bool = json_opt,
         ) -> None:
             from parknss.experiments.studies import StudyInputs, run_study, study_text
@@ -52,7 +58,7 @@ def register(app: typer.Typer) -> None:
             folder = out or Path("runs") / f"study-{name}{'-quick' if quick else ''}"
             inputs = StudyInputs(name=name, out=folder, quick=quick, executor=executor,
                                  workers=workers, address=address, data=data, config=config,
-                                 floor=floor)
+                                 floor=floor, overwrite=overwrite)
             run = run_study(inputs, _log)
             if as_json:
                 typer.echo(json.dumps(run.doc, indent=2, default=str))

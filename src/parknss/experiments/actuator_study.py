@@ -6,12 +6,13 @@ and Phase B (:func:`parknss.chain.selection.run_selection`), co-tunes the co-tun
 target inside the selected assembly (:func:`parknss.chain.study.run_cotune_study`), draws
 Fig. 6 (signal fidelity vs closed-loop value) and Fig. 3 (the winners replayed on a
 held-out park-out) and writes ``study.json`` and ``selection.json`` (the winners, what
-``parknss actuators build --selection`` reads) to ``out``. :func:`study_text` prints it.
+``parknss actuators build --selection`` reads) to the run folder ``out``
+(:func:`parknss.outputs.run_folder`: refused if it holds anything but the same study,
+unless ``overwrite``). :func:`study_text` prints it.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from parknss.chain.study import (
     run_cotune_study,
     selected_variants,
 )
+from parknss.outputs import run_folder
 from parknss.report.actuator_figures import autohold_mask, draw_fidelity, draw_replay
 from parknss.signals import DT
 
@@ -46,13 +48,14 @@ def _quiet(msg: str) -> None:
 class StudyInputs:
     """What the study reads: NSS folder (None: shipped), campaign folder (None: default),
     actuator YAML (None: shipped); ``out`` the folder it writes; ``fanout`` how the Phase
-    A fits run."""
+    A fits run; ``overwrite`` whether an ``out`` holding something else may be replaced."""
 
     out: Path
     nss: Path | None = None
     data: Path | None = None
     config: Path | None = None
     fanout: Fanout = field(default_factory=Fanout)
+    overwrite: bool = False
 
 
 def _fig3(sel: Selection, path: Path) -> Path:
@@ -73,34 +76,34 @@ def run_actuator_study(inputs: StudyInputs, progress: Callable[[str], None] = _q
     """The study: selection, co-tuning, figures and files; returns the JSON document."""
     t0 = time.perf_counter()
     cfg, loaded, campaign = load_inputs(inputs.nss, inputs.data, inputs.config, "study")
-    data = str(inputs.data) if inputs.data is not None else None
-    sel = run_selection(loaded.model, campaign, data, cfg, progress, inputs.fanout)
-    co = run_cotune_study(loaded.model, sel, cfg, progress)
-    pts = fidelity_points(sel)
-    corr = correlations(pts)
-    out = inputs.out
-    out.mkdir(parents=True, exist_ok=True)
-    stars = {
-        f"{co.target} before co-tuning": (co.signal_before["nmse"], co.single_before["vx_full"]),
-        f"{co.target} after co-tuning": (co.signal_after["nmse"], co.single_after["vx_full"]),
-    }
-    files = {"fig6": str(draw_fidelity(pts, stars, sel.phase_b.reference.vx_full, corr,
-                                       out / "fig6_fidelity.png"))}
-    files["fig3"] = str(_fig3(sel, out / "fig3_replay.png"))
-    doc = {
-        "nss": nss_info(loaded),
-        **sel.to_json(),
-        "cotune": co.to_json(),
-        "fig6": {"points": pts, **corr},
-        "selected_variants": selected_variants(sel),
-        "wall_s": time.perf_counter() - t0,
-        "files": files,
-    }
-    (out / "study.json").write_text(json.dumps(doc, indent=2, default=float))
-    (out / "selection.json").write_text(json.dumps(
-        {"winners": sel.winners(), "nss": nss_info(loaded)}, indent=2))
-    files["json"] = str(out / "study.json")
-    files["selection"] = str(out / "selection.json")
+    identity = {"nss": inputs.nss, "data": inputs.data, "config": inputs.config}
+    with run_folder(inputs.out, command="parknss actuators study", args=identity,
+                    overwrite=inputs.overwrite) as run:
+        data = str(inputs.data) if inputs.data is not None else None
+        sel = run_selection(loaded.model, campaign, data, cfg, progress, inputs.fanout)
+        co = run_cotune_study(loaded.model, sel, cfg, progress)
+        pts = fidelity_points(sel)
+        corr = correlations(pts)
+        out = inputs.out
+        before = (co.signal_before["nmse"], co.single_before["vx_full"])
+        after = (co.signal_after["nmse"], co.single_after["vx_full"])
+        stars = {f"{co.target} before co-tuning": before, f"{co.target} after co-tuning": after}
+        files = {"fig6": str(draw_fidelity(pts, stars, sel.phase_b.reference.vx_full, corr,
+                                           out / "fig6_fidelity.png"))}
+        files["fig3"] = str(_fig3(sel, out / "fig3_replay.png"))
+        doc = {
+            "nss": nss_info(loaded),
+            **sel.to_json(),
+            "cotune": co.to_json(),
+            "fig6": {"points": pts, **corr},
+            "selected_variants": selected_variants(sel),
+            "wall_s": time.perf_counter() - t0,
+            "files": files,
+        }
+        run.write_json("study.json", doc, default=float)
+        run.write_json("selection.json", {"winners": sel.winners(), "nss": nss_info(loaded)})
+        files["json"] = str(out / "study.json")
+        files["selection"] = str(out / "selection.json")
     return doc
 
 

@@ -20,7 +20,6 @@ folds, classes of different sizes) is split by plain k-fold instead
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
@@ -33,9 +32,11 @@ from parknss.data.splits import DEFAULT_FOLDS, FoldPlan, cv_plan
 from parknss.errors import ConfigError
 from parknss.executor import Job, run_jobs
 from parknss.experiments.config import merge_overrides
+from parknss.experiments.folds import fold_config
 from parknss.nss.campaigns import load_campaign
 from parknss.nss.checkpoint import load_model
 from parknss.nss.predict import predict_trials
+from parknss.outputs import run_folder
 from parknss.report.nss_figures import draw_history, draw_rollouts, pick_maneuvers
 
 MODEL_VARIANTS: dict[str, tuple[str, dict]] = {
@@ -201,9 +202,10 @@ def run_cv(
 @dataclass(frozen=True, kw_only=True)
 class CVInputs:
     """``parknss cv``: campaign folder ``data`` (None: default), NSS YAML ``config`` (None:
-    shipped), NSS ``overrides``, the model ``variants``, the executor settings and the run
+    shipped), NSS ``overrides``, the model ``variants``, the executor settings, the run
     folder ``out`` (cv.json, table2.txt, figures; fold cache in out/cache, models in
-    out/models)."""
+    out/models) and whether an ``out`` holding something else may be replaced
+    (``overwrite``)."""
 
     out: Path
     data: Path | None = None
@@ -213,6 +215,14 @@ class CVInputs:
     executor: str = "local"
     workers: int | None = None
     address: str | None = None
+    overwrite: bool = False
+
+    def identity(self) -> dict:
+        """What decides the results (the run folder's manifest): not the executor."""
+        config = str(self.config) if self.config else None
+        return {"data": self.data, "config": self.config, "overrides": self.overrides,
+                "variants": list(self.variants),
+                "nss_config": fold_config(config, self.overrides).digest()}
 
 
 def cv_figures(res: CVResult, campaign, out: Path) -> list[str]:
@@ -242,27 +252,29 @@ def _quiet(msg: str) -> None:
 def table2(inputs: CVInputs, log: Callable[[str], None] = _quiet) -> tuple[CVResult, dict]:
     """Table II as ``parknss cv`` runs it: the campaign checked for the NSS channels
     before any job starts, the CV of every variant, Figs. 4 and 5, cv.json and table2.txt
-    in ``out``; (result, its JSON document with the figure paths)."""
+    in the run folder ``out`` (:func:`parknss.outputs.run_folder`: the same arguments
+    resume it from its fold cache); (result, its JSON document with the figure paths)."""
     campaign = load_campaign(inputs.data, "nss", "parknss cv")
     plan = cv_plan(campaign)  # stratified, or plain k-fold (says why in plan.note)
     log(plan.note)
     out = inputs.out
-    out.mkdir(parents=True, exist_ok=True)
-    res = run_cv(
-        data=str(inputs.data) if inputs.data else None,
-        config=str(inputs.config) if inputs.config else None,
-        overrides=inputs.overrides,
-        variants=list(inputs.variants),
-        executor=inputs.executor,
-        workers=inputs.workers,
-        address=inputs.address,
-        cache_dir=out / "cache",
-        save_dir=out / "models",
-        plan=plan,
-    )
-    doc = res.to_json()
-    doc["figures"] = cv_figures(res, campaign, out)
-    (out / "cv.json").write_text(json.dumps(doc, indent=2))
-    (out / "table2.txt").write_text(res.table() + "\n")
+    with run_folder(out, command="parknss cv", args=inputs.identity(),
+                    overwrite=inputs.overwrite) as run:
+        res = run_cv(
+            data=str(inputs.data) if inputs.data else None,
+            config=str(inputs.config) if inputs.config else None,
+            overrides=inputs.overrides,
+            variants=list(inputs.variants),
+            executor=inputs.executor,
+            workers=inputs.workers,
+            address=inputs.address,
+            cache_dir=out / "cache",
+            save_dir=out / "models",
+            plan=plan,
+        )
+        doc = res.to_json()
+        doc["figures"] = cv_figures(res, campaign, out)
+        run.write_json("cv.json", doc)
+        run.write_text("table2.txt", res.table() + "\n")
     log(f"wrote {out / 'cv.json'}, {out / 'table2.txt'} and {len(doc['figures'])} figures")
     return res, doc

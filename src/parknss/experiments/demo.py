@@ -11,13 +11,16 @@ Five steps, each writing its artefacts to the run folder:
    and the learned chain (Fig. 8, Fig. 9);
 5. ``summary.json`` with every number printed (:func:`summary_text`).
 
+The run folder is claimed through :func:`parknss.outputs.run_folder`: the same demo
+(campaign, cell, NSS, chain) may run again into it, anything else there is refused unless
+``overwrite``; every file is written atomically.
+
 The shipped artefacts are required: a missing one is an error that names it (there is no
 stand-in).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,6 +36,7 @@ from parknss.experiments.rating import run_rate
 from parknss.metrics.errors import logged_and_truth_errors
 from parknss.nss.checkpoint import load_model
 from parknss.nss.predict import predict_trials
+from parknss.outputs import run_folder
 from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
 from parknss.report.sim_figures import draw_scene_run
 from parknss.report.trial_figure import draw_trial
@@ -48,13 +52,15 @@ def _quiet(msg: str) -> None:
 @dataclass(frozen=True, kw_only=True)
 class DemoInputs:
     """The run folder ``out``, the campaign folder ``data`` (None: the bundled one), the
-    grid ``cell`` (0-35) parked in closed loop, and the NSS and chain artefacts."""
+    grid ``cell`` (0-35) parked in closed loop, the NSS and chain artefacts, and whether an
+    ``out`` holding something else may be replaced (``overwrite``)."""
 
     out: Path
     data: Path | None = None
     cell: int = 26
     nss: Path = SHIPPED_NSS
     chain: Path = SHIPPED_CHAIN
+    overwrite: bool = False
 
 
 def _errors(predictions, trials, horizon) -> dict:
@@ -75,45 +81,47 @@ def run_demo(inputs: DemoInputs, log: Say = _quiet, show: Say = _quiet) -> dict:
     out, nss, chain = inputs.out, inputs.nss, inputs.chain
     _require(nss, "NSS model")
     _require(chain, "command-to-vehicle chain")
+    identity = {"data": inputs.data, "cell": inputs.cell, "nss": nss, "chain": chain}
     t0 = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    src = inputs.data or BUNDLED_CAMPAIGN
-    log(f"1/4 campaign {src} (synthetic reference vehicle unless you gave --data)")
-    campaign = read_campaign(src)
-    trials = list(campaign)
-    summary = describe_campaign(campaign)
-    show(summary.table())
-    doc: dict = {"campaign": summary.to_json(), "figures": {}}
-    doc["figures"]["trial"] = str(draw_trial(trials[0], out / "trial.png"))
+    with run_folder(out, command="parknss demo", args=identity,
+                    overwrite=inputs.overwrite) as folder:
+        src = inputs.data or BUNDLED_CAMPAIGN
+        log(f"1/4 campaign {src} (synthetic reference vehicle unless you gave --data)")
+        campaign = read_campaign(src)
+        trials = list(campaign)
+        summary = describe_campaign(campaign)
+        show(summary.table())
+        doc: dict = {"campaign": summary.to_json(), "figures": {}}
+        doc["figures"]["trial"] = str(draw_trial(trials[0], out / "trial.png"))
 
-    log(f"2/4 shipped NSS {nss}: open-loop rollouts of {len(trials)} trials")
-    loaded = load_model(nss)
-    horizon = loaded.training.get("window_length")
-    pred = predict_trials(loaded.model, trials)
-    doc["nss"] = {"model": str(nss), **_errors(pred, trials, horizon)}
-    doc["figures"]["nss_fig5"] = str(
-        draw_rollouts(pick_maneuvers(trials), pred, out / "fig5_nss.png", horizon,
-                      title="Shipped NSS, open loop from the logged actuals")
-    )
+        log(f"2/4 shipped NSS {nss}: open-loop rollouts of {len(trials)} trials")
+        loaded = load_model(nss)
+        horizon = loaded.training.get("window_length")
+        pred = predict_trials(loaded.model, trials)
+        doc["nss"] = {"model": str(nss), **_errors(pred, trials, horizon)}
+        doc["figures"]["nss_fig5"] = str(
+            draw_rollouts(pick_maneuvers(trials), pred, out / "fig5_nss.png", horizon,
+                          title="Shipped NSS, open loop from the logged actuals")
+        )
 
-    log(f"3/4 shipped chain {chain}: rollouts from the logged commands, ISO/TS 18571 rating")
-    cpred = load_chain(chain).predict_trials(trials)
-    doc["chain"] = {"chain": str(chain), **_errors(cpred, trials, None)}
-    doc["figures"]["chain_fig5"] = str(
-        draw_rollouts(pick_maneuvers(trials), cpred, out / "fig5_chain.png",
-                      title="Shipped chain, open loop from the logged commands")
-    )
-    rating = run_rate(RateInputs(data=src, chain=chain), out / "rate", log)
-    doc["rating"] = rating.doc["summary"]
-    doc["figures"]["fig7"] = rating.doc["files"]["figure"]
-    show(rating.table.table())
+        log(f"3/4 shipped chain {chain}: rollouts from the logged commands, ISO/TS 18571 rating")
+        cpred = load_chain(chain).predict_trials(trials)
+        doc["chain"] = {"chain": str(chain), **_errors(cpred, trials, None)}
+        doc["figures"]["chain_fig5"] = str(
+            draw_rollouts(pick_maneuvers(trials), cpred, out / "fig5_chain.png",
+                          title="Shipped chain, open loop from the logged commands")
+        )
+        rating = run_rate(RateInputs(data=src, chain=chain), out / "rate", log)
+        doc["rating"] = rating.doc["summary"]
+        doc["figures"]["fig7"] = rating.doc["files"]["figure"]
+        show(rating.table.table())
 
-    log(f"4/4 closed loop: cell {inputs.cell} under the kinematic plant and the learned chain")
-    run = simulate_scene(str(inputs.cell), ["kinematic", "chain"])
-    doc["closed_loop"] = run.to_json()
-    doc["figures"].update(draw_scene_run(run, out))
-    doc["wall_s"] = round(time.perf_counter() - t0, 1)
-    (out / "summary.json").write_text(json.dumps(doc, indent=2, default=str))
+        log(f"4/4 closed loop: cell {inputs.cell} under the kinematic plant and the learned chain")
+        run = simulate_scene(str(inputs.cell), ["kinematic", "chain"])
+        doc["closed_loop"] = run.to_json()
+        doc["figures"].update(draw_scene_run(run, out))
+        doc["wall_s"] = round(time.perf_counter() - t0, 1)
+        folder.write_json("summary.json", doc, default=str)
     return doc
 
 

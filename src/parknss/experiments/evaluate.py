@@ -4,12 +4,13 @@
 actuals, or a chain artefact from the logged commands, over every trial of a campaign
 (default: the bundled one) and gives its errors (:mod:`parknss.metrics.errors`) against
 the logged channels and, for a synthetic campaign, against the noise-free truth; it draws
-Fig. 5 for a park-in and a park-out and writes ``evaluate.json``.
+Fig. 5 for a park-in and a park-out and writes ``evaluate.json`` to the run folder
+(:func:`parknss.outputs.run_folder`: an ``out`` holding anything but an evaluation of the
+same source on the same campaign is refused unless ``overwrite``).
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,20 +22,23 @@ from parknss.nss.campaigns import load_campaign
 from parknss.nss.checkpoint import load_model
 from parknss.nss.config import LimiterConfig
 from parknss.nss.predict import predict_trials
+from parknss.outputs import run_folder
 from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
 
 
 @dataclass(frozen=True, kw_only=True)
 class EvaluateInputs:
     """An NSS folder ``model`` (None: shipped) or a ``chain`` artefact, the campaign
-    ``data`` (None: default), whether the inference ``limiter`` runs (NSS only), and the
-    run folder ``out``."""
+    ``data`` (None: default), whether the inference ``limiter`` runs (NSS only), the run
+    folder ``out`` and whether an ``out`` holding something else may be replaced
+    (``overwrite``)."""
 
     out: Path
     model: Path | None = None
     chain: Path | None = None
     data: Path | None = None
     limiter: bool = False
+    overwrite: bool = False
 
 
 def errors_text(title: str, e: dict) -> str:
@@ -65,27 +69,30 @@ def evaluate_open_loop(inputs: EvaluateInputs) -> tuple[dict, str]:
                              "parknss evaluate")
     trials = list(campaign)
     if chain is not None:
-        source = str(chain)
-        predictions = load_chain(chain).predict_trials(trials)
-        horizon = None
+        source, predictor, horizon = str(chain), load_chain(chain).predict_trials, None
     else:
         loaded = load_model(inputs.model or SHIPPED_NSS)
-        source = str(loaded.path)
+        source, horizon = str(loaded.path), loaded.training.get("window_length")
         lim = LimiterConfig(enabled=True) if inputs.limiter else None
-        predictions = predict_trials(loaded.model, trials, lim)
-        horizon = loaded.training.get("window_length")
-    logged, truth = logged_and_truth_errors(predictions, trials, horizon)
-    out = inputs.out
-    out.mkdir(parents=True, exist_ok=True)
-    fig = draw_rollouts(
-        pick_maneuvers(trials),
-        predictions,
-        out / "fig5_rollouts.png",
-        horizon,
-        title=f"Open-loop rollout of {Path(source).name}",
-    )
-    doc = {**logged, "source": source, "truth": truth, "figure": str(fig)}
-    (out / "evaluate.json").write_text(json.dumps(doc, indent=2))
+
+        def predictor(trials):
+            return predict_trials(loaded.model, trials, lim)
+
+    identity = {"model": None if chain is not None else (inputs.model or SHIPPED_NSS),
+                "chain": chain, "data": inputs.data, "limiter": inputs.limiter}
+    with run_folder(inputs.out, command="parknss evaluate", args=identity,
+                    overwrite=inputs.overwrite) as run:
+        predictions = predictor(trials)
+        logged, truth = logged_and_truth_errors(predictions, trials, horizon)
+        fig = draw_rollouts(
+            pick_maneuvers(trials),
+            predictions,
+            run.path / "fig5_rollouts.png",
+            horizon,
+            title=f"Open-loop rollout of {Path(source).name}",
+        )
+        doc = {**logged, "source": source, "truth": truth, "figure": str(fig)}
+        run.write_json("evaluate.json", doc)
     text = errors_text(f"{source} on {len(trials)} trials vs logged channels", logged)
     if truth is not None:
         text += "\n" + errors_text("vs noise-free truth channels (synthetic campaign)", truth)

@@ -2,8 +2,10 @@
 
 :func:`run_rate` rates the source of a :class:`~parknss.chain.rating.RateInputs` (a model,
 a chain or the truth replay, :func:`parknss.chain.rating.rate_source`) and writes
-``ratings.csv``, ``ratings.json`` and the box plot ``iso_rating.png`` (Fig. 7) to ``out``.
-The demo and the ``fig7`` artefact of ``parknss reproduce`` call it too.
+``ratings.csv``, ``ratings.json`` and the box plot ``iso_rating.png`` (Fig. 7) to ``out``
+(each file atomically). The demo and the ``fig7`` artefact of ``parknss reproduce`` call
+it into a folder of their runs; ``parknss rate`` calls :func:`rate_run`, which claims
+``out`` as its run folder first (:func:`parknss.outputs.run_folder`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 
 from parknss.chain.rating import RateInputs, rate_source
 from parknss.metrics.rating_report import RatingTable
+from parknss.outputs import run_folder, write_text_atomic
 from parknss.report.iso_figure import draw_iso_boxplot
 
 
@@ -43,5 +46,18 @@ def run_rate(
         "json": str(out / "ratings.json"),
         "figure": str(draw_iso_boxplot(table, out / "iso_rating.png")),
     }
-    (out / "ratings.json").write_text(json.dumps(doc, indent=2))
+    write_text_atomic(out / "ratings.json", json.dumps(doc, indent=2))
     return RatingRun(table, doc)
+
+
+def rate_run(
+    inputs: RateInputs, out: Path, *, overwrite: bool = False,
+    progress: Callable[[str], None] = _quiet,
+) -> RatingRun:
+    """``parknss rate``: :func:`run_rate` into the run folder ``out``, refused if it holds
+    anything but a rating of the same source unless ``overwrite``."""
+    inputs.check()
+    identity = {"data": inputs.data, "model": inputs.model, "chain": inputs.chain,
+                "replay_truth": inputs.replay_truth, "config": inputs.config}
+    with run_folder(out, command="parknss rate", args=identity, overwrite=overwrite):
+        return run_rate(inputs, out, progress)

@@ -4,21 +4,25 @@
 or one by name) with one :class:`~parknss.experiments.results.RunContext` (budget,
 executor settings, campaign, config, result cache in ``<out>/cache``), writes the
 self-contained ``report.html`` with each paper finding beside what was measured, and
-``run.json``, the run summary it returns.
+the run summary it returns into the run folder's manifest ``run.json``. The run folder is
+claimed through :func:`parknss.outputs.run_folder`: the same artefacts, budget, campaign
+and config resume it (the cache is reused), anything else is refused unless
+``overwrite``.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from parknss.experiments.registry import artefacts, get, git_revision
+from parknss.experiments.folds import fold_config
+from parknss.experiments.registry import artefacts, get
 from parknss.experiments.results import RunContext
 from parknss.nss.config import NSSConfig
+from parknss.outputs import git_revision, run_folder
 from parknss.report.html import write_report
 
 
@@ -26,7 +30,8 @@ from parknss.report.html import write_report
 class ReproduceInputs:
     """Artefact ``name`` (or "all"), the ``quick`` budget, the executor settings, the
     campaign ``data`` (None: default), the run folder ``out`` (None:
-    ``runs/reproduce-<UTC stamp>``) and the studies' YAML ``config`` (None: shipped)."""
+    ``runs/reproduce-<UTC stamp>``), the studies' YAML ``config`` (None: shipped) and
+    whether an ``out`` holding something else may be replaced (``overwrite``)."""
 
     name: str = "all"
     quick: bool = False
@@ -36,6 +41,7 @@ class ReproduceInputs:
     data: Path | None = None
     out: Path | None = None
     config: Path | None = None
+    overwrite: bool = False
 
 
 def artefact_list() -> str:
@@ -54,7 +60,6 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
     stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
     quick = inputs.quick
     out = inputs.out or Path("runs") / f"reproduce-{stamp}{'-quick' if quick else ''}"
-    out.mkdir(parents=True, exist_ok=True)
     ctx = RunContext(
         out_dir=out,
         quick=quick,
@@ -65,6 +70,23 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
         cache_dir=out / "cache",
         config=inputs.config,
     )
+    identity = {
+        "artefacts": [a.name for a in chosen],
+        "quick": quick,
+        "data": inputs.data,
+        "config": inputs.config,
+        "experiments_config": ctx.experiments_config().digest(),
+        "nss_config": fold_config(None, None).digest(),
+    }
+    with run_folder(out, command="parknss reproduce", args=identity,
+                    overwrite=inputs.overwrite) as run:
+        summary = _run(ctx, chosen, stamp, inputs, log)
+        run.manifest.update(summary)  # run.json: the manifest and the run summary
+    return summary
+
+
+def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> dict:
+    out, quick = ctx.out_dir, ctx.quick
     sections = []
     for art in chosen:
         log(f"[reproduce] {art.name}: {art.title}")
@@ -87,7 +109,7 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
         },
     }
     report = write_report(out / "report.html", "parknss reproduction report", sections, meta)
-    summary = {
+    return {
         "report": str(report),
         **meta,
         "wall_s": {a.name: round(r.wall_s, 2) for a, r in sections},
@@ -97,5 +119,3 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
             if p.is_file() and "cache" not in p.parts
         ),
     }
-    (out / "run.json").write_text(json.dumps(summary, indent=2))
-    return summary

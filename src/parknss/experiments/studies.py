@@ -11,6 +11,13 @@ such) or a seed-noise JSON written by ``parknss study seed-noise``. :func:`estim
 counts each study's fits and epochs and converts them to CPU hours with a measured
 paper-size seconds-per-epoch.
 
+``out`` is a run folder of ``parknss study`` (:func:`parknss.outputs.run_folder`) whose
+arguments are the budget, the campaign, the configs (their digests too) and the floor,
+not the study: the studies share one folder and its cache (``ablations`` and ``limiter``
+measure the floor from the seed-noise fits already there), each writing its own files,
+and the manifest lists the ``studies`` run in it. A folder of another budget, campaign,
+config or floor, or holding anything else, is refused unless ``overwrite``.
+
 Every study refuses, in one line, a campaign that lacks a channel NSS identification needs
 (:mod:`parknss.data.workflows`), and says in ``note`` when the campaign is not
 stratifiable and its folds are plain k-fold (:mod:`parknss.data.splits`).
@@ -18,7 +25,6 @@ stratifiable and its folds are plain k-fold (:mod:`parknss.data.splits`).
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +32,7 @@ from pathlib import Path
 
 from parknss.errors import ConfigError
 from parknss.experiments.results import Table
+from parknss.outputs import run_folder
 
 STUDIES = ("learning-curve", "seed-noise", "ablations", "limiter", "convergence")
 
@@ -68,7 +75,8 @@ def _floor(spec: str, cfg, quick: bool, sweep, log: Callable[[str], None]):
 class StudyInputs:
     """One study: its ``name`` (one of :data:`STUDIES`), the ``quick`` budget, the folder
     ``out`` (and cache), the executor settings, the campaign ``data`` (None: default), the
-    experiments YAML ``config`` (None: shipped) and the noise ``floor`` spec."""
+    experiments YAML ``config`` (None: shipped), the noise ``floor`` spec and whether an
+    ``out`` holding something else may be replaced (``overwrite``)."""
 
     name: str
     out: Path
@@ -80,6 +88,18 @@ class StudyInputs:
     config: Path | None = None
     floor: str = "measure"
     progress: bool = True
+    overwrite: bool = False
+
+    def identity(self, cfg) -> dict:
+        """What decides the results (the run folder's manifest; not the study, so the
+        studies share a folder and its cache), with the digests of the experiments config
+        ``cfg`` and of the NSS base config the fold jobs load."""
+        from parknss.experiments.folds import fold_config
+
+        floor = Path(self.floor) if self.floor not in ("measure", "paper") else self.floor
+        return {"quick": self.quick, "data": self.data, "config": self.config,
+                "floor": floor, "experiments_config": cfg.digest(),
+                "nss_config": fold_config(None, None).digest()}
 
 
 @dataclass
@@ -106,66 +126,66 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
     stratified, note = fold_note(name, checked_campaign(data, f"parknss study {name}"), cfg)
     if inputs.progress:
         log(note)
-    out.mkdir(parents=True, exist_ok=True)
-    sweep = Sweep(inputs.executor, inputs.workers, inputs.address, out / "cache",
-                  str(data) if data else None, inputs.progress)
-    floor = inputs.floor
-    t0 = time.perf_counter()
-    if name == "learning-curve":
-        from parknss.experiments.learning_curve import learning_curve
+    with run_folder(out, command="parknss study", args=inputs.identity(cfg),
+                    overwrite=inputs.overwrite) as run:
+        sweep = Sweep(inputs.executor, inputs.workers, inputs.address, out / "cache",
+                      str(data) if data else None, inputs.progress)
+        floor = inputs.floor
+        t0 = time.perf_counter()
+        if name == "learning-curve":
+            from parknss.experiments.learning_curve import learning_curve
 
-        res = learning_curve(cfg, quick, sweep)
-        tables, found = st.learning_curve_tables(res), fnd.learning_curve_findings(res)
-        figure = fig.draw_learning_curve(res, out / "learning_curve.png")
-    elif name == "seed-noise":
-        from parknss.experiments.noise import seed_noise
+            res = learning_curve(cfg, quick, sweep)
+            tables, found = st.learning_curve_tables(res), fnd.learning_curve_findings(res)
+            figure = fig.draw_learning_curve(res, out / "learning_curve.png")
+        elif name == "seed-noise":
+            from parknss.experiments.noise import seed_noise
 
-        res = seed_noise(cfg, quick, sweep)
-        tables, found = st.seed_noise_tables(res), fnd.seed_noise_findings(res)
-        figure = fig.draw_seed_noise(res, out / "seed_noise.png")
-    elif name == "ablations":
-        from parknss.experiments.ablations import ablations
+            res = seed_noise(cfg, quick, sweep)
+            tables, found = st.seed_noise_tables(res), fnd.seed_noise_findings(res)
+            figure = fig.draw_seed_noise(res, out / "seed_noise.png")
+        elif name == "ablations":
+            from parknss.experiments.ablations import ablations
 
-        res = ablations(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
-        tables, found = st.ablation_tables(res), fnd.ablation_findings(res)
-        figure = fig.draw_ablations(res, out / "table3_effects.png")
-    elif name == "limiter":
-        from parknss.experiments.limiter_study import limiter_study
+            res = ablations(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
+            tables, found = st.ablation_tables(res), fnd.ablation_findings(res)
+            figure = fig.draw_ablations(res, out / "table3_effects.png")
+        elif name == "limiter":
+            from parknss.experiments.limiter_study import limiter_study
 
-        res = limiter_study(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
-        tables, found = st.limiter_tables(res), fnd.limiter_findings(res)
-        figure = fig.draw_limiter(res, out / "limiter.png")
-    else:
-        from parknss.experiments.convergence import convergence
-        from parknss.report.nss_figures import draw_history
+            res = limiter_study(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
+            tables, found = st.limiter_tables(res), fnd.limiter_findings(res)
+            figure = fig.draw_limiter(res, out / "limiter.png")
+        else:
+            from parknss.experiments.convergence import convergence
+            from parknss.report.nss_figures import draw_history
 
-        res = convergence(cfg, quick, sweep)
-        tables, found = st.convergence_tables(res), []
-        figure = draw_history(
-            res.epochs,
-            res.raw,
-            res.smooth,
-            out / "fig4_convergence.png",
-            res.output,
-            res.best_epoch,
-        )
-    doc = {
-        "study": name,
-        "quick": quick,
-        "executor": inputs.executor,
-        "wall_s": round(time.perf_counter() - t0, 2),
-        "result": res.to_json(),
-        "findings": [
-            {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
-        ],
-        "figure": str(figure),
-        "config": cfg.model_dump(mode="json"),
-        "stratified": stratified,
-        "note": note,
-    }
-    path = out / f"{name}.json"
-    path.write_text(json.dumps(doc, indent=2, default=str))
-    doc["json"] = str(path)
+            res = convergence(cfg, quick, sweep)
+            tables, found = st.convergence_tables(res), []
+            figure = draw_history(
+                res.epochs,
+                res.raw,
+                res.smooth,
+                out / "fig4_convergence.png",
+                res.output,
+                res.best_epoch,
+            )
+        doc = {
+            "study": name,
+            "quick": quick,
+            "executor": inputs.executor,
+            "wall_s": round(time.perf_counter() - t0, 2),
+            "result": res.to_json(),
+            "findings": [
+                {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
+            ],
+            "figure": str(figure),
+            "config": cfg.model_dump(mode="json"),
+            "stratified": stratified,
+            "note": note,
+        }
+        doc["json"] = str(run.write_json(f"{name}.json", doc, default=str))
+        run.manifest["studies"] = sorted({*run.manifest.get("studies", []), name})
     return StudyRun(doc, tables)
 
 

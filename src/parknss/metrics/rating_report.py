@@ -27,6 +27,7 @@ from parknss.config import StrictModel
 from parknss.data.trial import Trial
 from parknss.errors import DataError
 from parknss.metrics.iso18571 import ISORatingConfig, LowpassConfig, grade_of, lowpass, rate
+from parknss.outputs import atomic_file
 from parknss.signals import DT
 
 RATED_CHANNELS: tuple[str, ...] = ("vx", "yaw_rate", "ax", "ay")
@@ -148,9 +149,8 @@ class RatingTable:
     def to_csv(self, path: str | Path) -> Path:
         """Write one line per rating (trial, channel, conditioning, sub-ratings, grade)."""
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
         names = [f.name for f in fields(RatingRow)]
-        with p.open("w", newline="") as fh:
+        with atomic_file(p) as tmp, tmp.open("w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(names)
             for r in self.rows:

@@ -19,7 +19,7 @@ module computes exactly the same recurrence as one :class:`torch.autograd.Functi
 Shapes: x0 (B, 2); U (T-1, B, m) the scaled inputs of the steps, time-major; first layer
 W0 (H, 2+m), b0 (H,) acting on [x, u]; hidden W_i (H, H), b_i (H,); head Wout (2, H),
 bout (2,). The result X is (T, B, 2) with X[0] = x0. Checked against autograd with
-``torch.autograd.gradcheck`` in float64 and against the eager loop (tests/test_nss_fused.py).
+``torch.autograd.gradcheck`` in float64 and against the eager loop (tests/nss/test_fused.py).
 """
 
 from __future__ import annotations

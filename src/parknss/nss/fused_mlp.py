@@ -9,7 +9,7 @@ arithmetic. This Function computes the same layers into recycled buffers
 δ_{i} = δ_{i+1}·W_{i+1} ⊙ (1 - h_i²), weight gradients δᵀ·h.
 
 apply(x (N, n_in), W0, b0, W1, b1, ..., W_out, b_out) -> y (N, n_out). Checked against
-autograd by gradcheck in float64 (tests/test_nss_fused.py).
+autograd by gradcheck in float64 (tests/nss/test_fused.py).
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ simulator; :meth:`NSSModel.step` advances one sample in real time and reproduces
 (:meth:`NSSModel.integrate`, :meth:`NSSModel.step_function`) and the yaw readout
 (:meth:`NSSModel.reconstruct_yaw`) are written here once: the chain's interleaved rollout
 calls them, and the NumPy real-time twin (:class:`parknss.chain.realtime.NumpyNSS`) is
-tested against :meth:`NSSModel.step` (tests/test_chain.py).
+tested against :meth:`NSSModel.step` (tests/chain/test_chain.py).
 """
 
 from __future__ import annotations
@@ -338,7 +338,7 @@ class NSSModel(nn.Module):
         """Real time: the prediction at this sample (fields (B, 1)) and the next state.
 
         state: (B, 2) internal scaled state; u: (B, 4) physical input of this sample.
-        Identical to :meth:`rollout` step by step (tests/test_nss_model.py).
+        Identical to :meth:`rollout` step by step (tests/nss/test_model.py).
         """
         u_s = self.scale_inputs(u.to(self.dtype))
         out = self.readout(state[:, None], u_s[:, None])

@@ -6,7 +6,7 @@ perceptron). :func:`tanh_mlp` builds it; :func:`linear_layers` lists its ``nn.Li
 modules (what the fused kernels and the real-time twins read); :func:`numpy_layers` copies
 their weights once into float64 arrays and :func:`numpy_tanh_mlp` evaluates them with the
 same arithmetic (``tanh(W @ h + b)``), so a NumPy real-time step equals the torch module to
-rounding (tests/test_nss_model.py).
+rounding (tests/nss/test_model.py).
 """
 
 from __future__ import annotations

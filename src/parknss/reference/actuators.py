@@ -76,8 +76,10 @@ class GearSelector:
 class DriveActuator:
     """Motor torque: dead time, creep floor in D/R, lag depending on speed and gear.
 
-    target = 0 in neutral/park or while shifting, else max(cmd, creep(v_along_gear));
-    the torque follows the target with time constant
+    target = 0 in neutral/park or while shifting, else min(max(cmd, creep(v_along_gear)),
+    ``limit``) (``limit``: the torque the battery can supply, set per step by the vehicle;
+    infinite unless a trial's conditions limit it); the torque follows the target with
+    time constant
     tau = (tau_moving + (tau_standstill - tau_moving)·exp(-|v|/v_scale))·(reverse factor).
     """
 
@@ -88,6 +90,7 @@ class DriveActuator:
         self.v_scale = kmh_to_ms(p.tau_speed_scale_kmh)
         self.delay = DeadTime(p.delay_s, dt)
         self.torque = 0.0
+        self.limit = math.inf
 
     def reset(self, torque: float = 0.0) -> None:
         self.torque = torque
@@ -112,7 +115,7 @@ class DriveActuator:
     def step(self, torque_cmd: float, gear: int, shifting: bool, vx: float) -> float:
         """Advance one sample; `torque_cmd` already clamped to [0, torque_max]. Returns N·m."""
         cmd = self.delay(torque_cmd)
-        target = 0.0 if (gear == 0 or shifting) else max(cmd, self.creep(vx, gear))
+        target = 0.0 if (gear == 0 or shifting) else min(max(cmd, self.creep(vx, gear)), self.limit)
         alpha = 1.0 - math.exp(-self.dt / self.time_constant(vx, gear))
         self.torque += (target - self.torque) * alpha
         return self.torque

@@ -4,8 +4,14 @@ Shape of the paper's campaign (§IV-A): 4 classes (MANEUVER_CLASSES) x 4 repetit
 100 Hz, multi-segment park-in with reversals and single-segment park-out, toward the
 left and the right, about 21-64 s each, about 70 direction changes in all. Each trial
 keeps the noise-free ``truth_*`` channels beside the logged ones (ground-truth
-evaluation only). Everything follows from (seed, vehicle parameters): same inputs, same
-bits.
+evaluation only). Everything follows from (seed, vehicle parameters, conditions profile):
+same inputs, same bits.
+
+Per-trial conditions (:mod:`parknss.reference.conditions`) are drawn from the vehicle
+YAML's ``conditions`` block under the profile it names (or the one passed in), from a
+stream of their own; they go into each trial's provenance (``conditions``, ground truth)
+and the campaign meta (``conditions_profile``, ``conditions_digest``). Profile ``none``
+draws nothing and writes nothing: the campaign is the one generated before conditions.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import numpy as np
 
 from parknss.data.trial import MANEUVER_CLASSES, Campaign, Trial
 from parknss.errors import ConfigError
+from parknss.reference.conditions import CONDITIONS_KEY, TrialConditions, draw_conditions
 from parknss.reference.driver import ApsDriver, DriverParams
 from parknss.reference.maneuvers import ManeuverPlan, make_plan
 from parknss.reference.params import ReferenceVehicleParams, load_vehicle_params
@@ -52,9 +59,12 @@ def drive_plan(
     params: ReferenceVehicleParams,
     noise_seed: int,
     driver_params: DriverParams | None = None,
+    conditions: TrialConditions | None = None,
 ) -> dict[str, np.ndarray]:
-    """Drive one plan closed loop; return all channels (commands, logged, truth), (T,)."""
-    car = ReferenceVehicle(params, seed=noise_seed)
+    """Drive one plan closed loop under ``conditions``; return all channels (commands,
+    logged, truth), (T,). The driver is calibrated on the nominal vehicle: it knows
+    nothing of the conditions but what the logged signals show it."""
+    car = ReferenceVehicle(params, seed=noise_seed, conditions=conditions)
     driver = ApsDriver(plan, params, driver_params, dt=car.dt)
     y = car.reset()
     rows: list[tuple[float, ...]] = []
@@ -81,23 +91,30 @@ def generate_trial(
     params: ReferenceVehicleParams | None = None,
     driver_params: DriverParams | None = None,
     vehicle_hash: str | None = None,
+    conditions: str | None = None,
 ) -> Trial:
     """One synthetic trial, e.g. ``generate_trial("park_in_left", 1)`` -> park_in_left_r1.
 
     The plan is drawn from (seed, class, repetition); a plan whose driven trial falls
     outside LENGTH_RANGE_S (the paper's 21-64 s) is redrawn with the next attempt index,
-    deterministically, so the same inputs always give the same trial.
+    deterministically, so the same inputs always give the same trial. The trial's
+    conditions are drawn once from (seed, class, repetition) under the profile
+    ``conditions`` (default: ``params.conditions.profile``) and kept across redraws.
     """
     params = params or ReferenceVehicleParams()
     if repetition < 1:
         raise ConfigError(f"repetition must be >= 1, got {repetition}")
+    trial_seeds(seed, maneuver, repetition, params.seed)  # checks the class
+    cond = draw_conditions(
+        params.conditions, seed, MANEUVER_CLASSES.index(maneuver), repetition, conditions
+    )
     lo, hi = LENGTH_RANGE_S
     for attempt in range(MAX_ATTEMPTS):
         plan_seed, noise_seed = trial_seeds(seed, maneuver, repetition, params.seed, attempt)
         plan = make_plan(
             maneuver, repetition, np.random.default_rng(plan_seed), params.geometry.steer_lock_deg
         )
-        channels = drive_plan(plan, params, noise_seed, driver_params)
+        channels = drive_plan(plan, params, noise_seed, driver_params, cond)
         if lo <= len(channels["t"]) / SAMPLE_RATE_HZ <= hi:
             break
     else:
@@ -118,6 +135,8 @@ def generate_trial(
         "vehicle_yaml_sha256": vehicle_hash,
         "planned_reversals": plan.reversals,
     }
+    if cond is not None:
+        provenance[CONDITIONS_KEY] = cond.model_dump()
     return Trial(
         id=f"{maneuver}_r{repetition}",
         maneuver=maneuver,
@@ -130,10 +149,17 @@ def generate_trial(
 
 
 def generate_campaign(
-    seed: int = 0, vehicle_yaml: Path | None = None, progress: bool = False
+    seed: int = 0,
+    vehicle_yaml: Path | None = None,
+    progress: bool = False,
+    conditions: str | None = None,
 ) -> Campaign:
-    """The 16-trial synthetic campaign (4 classes x 4 repetitions) of one vehicle YAML."""
+    """The 16-trial synthetic campaign (4 classes x 4 repetitions) of one vehicle YAML,
+    its trials under conditions of the profile ``conditions`` (default: the YAML's
+    ``conditions.profile``; ``none``, ``typical`` or ``harsh``)."""
     params = load_vehicle_params(vehicle_yaml)
+    if conditions is not None:
+        params = params.replace(conditions={"profile": conditions})
     yaml_hash = (
         hashlib.sha256(Path(vehicle_yaml).read_bytes()).hexdigest() if vehicle_yaml else None
     )
@@ -155,4 +181,7 @@ def generate_campaign(
         "vehicle_params_digest": params.digest(),
         "vehicle_geometry": params.to_geometry().to_dict(),
     }
+    if params.conditions.profile != "none":
+        meta["conditions_profile"] = params.conditions.profile
+        meta["conditions_digest"] = params.conditions.digest()
     return Campaign(trials, name=f"reference_seed{seed}", meta=meta)

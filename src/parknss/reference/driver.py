@@ -12,7 +12,14 @@ command set {gear, torque_cmd, decel_cmd, steer_cmd}:
   reference that ramps up, cruises and falls as sqrt(2·a·remaining distance), tracked
   by a PI force controller split into a torque request (when more than the creep force
   is needed) or a deceleration request (when less);
-* distance from the logged wheel speed, standstill when it reads inside the blind zone.
+* distance from the logged wheel speed, standstill when it reads inside the blind zone;
+* a road-slope estimate from the logged longitudinal acceleration at standstill (as an
+  ESC's hill-hold does): beyond ``slope_threshold`` it adds the grade force to the speed
+  controller, the launch torque and the holding deceleration; below it (flat floors,
+  accelerometer bias) the driver ignores it;
+* two fallbacks a real APS also has: a stop that does not come to rest within
+  ``stop_timeout_s`` brakes harder, and a launch that has not moved within
+  ``launch_timeout_s`` of reaching its torque keeps raising it.
 """
 
 from __future__ import annotations
@@ -45,6 +52,16 @@ class DriverParams(StrictModel):
     standstill_s: float = Field(0.3, ge=0, description="blind-zone time confirming stop, s")
     steer_rate_dps: float = Field(400.0, gt=0, description="steering request slew, deg/s")
     steer_tolerance_deg: float = Field(3.0, gt=0, description="steer settled within, deg")
+    slope_filter_s: float = Field(0.2, gt=0, description="slope-estimate filter time, s")
+    slope_threshold: float = Field(
+        0.015, ge=0, description="slope (sin) below which the estimate is ignored, -"
+    )
+    stop_timeout_s: float = Field(4.0, gt=0, description="stop not at rest after this, s")
+    stop_extra_rate: float = Field(0.5, ge=0, description="extra decel request growth, m/s³")
+    launch_timeout_s: float = Field(2.5, gt=0, description="launch not moving after this, s")
+    launch_extra_rate_nms: float = Field(
+        40.0, ge=0, description="launch torque growth after the timeout, N·m/s"
+    )
 
 
 IDLE, HOLD, LAUNCH, DRIVE, STOP, PARK, DONE = (
@@ -81,6 +98,7 @@ class ApsDriver:
         self.f_roll = b.rolling_resistance * b.mass_kg * G
         self.creep_nm = vehicle.drive.creep_torque_nm
         self.creep_fade = kmh_to_ms(vehicle.drive.creep_fade_kmh)
+        self.decel_floor = vehicle.brake.decel_cmd_min
         self.phase = IDLE
         self.seg_index = 0
         self.t_phase = 0.0
@@ -92,6 +110,8 @@ class ApsDriver:
         self.v_ref = 0.0
         self.integral = 0.0
         self._still = 0.0
+        self._ax_still = 0.0  # filtered logged ax at confirmed standstill, m/s²
+        self.slope = 0.0  # slope estimate (sin of the pitch, nose up > 0) in use, -
 
     # ------------------------------------------------------------------ public
     @property
@@ -107,6 +127,8 @@ class ApsDriver:
         dt = self.dt
         self.t_phase += dt
         self._still = self._still + dt if abs(y.vx) < BLIND_ZONE_MS else 0.0
+        if self._still >= self.p.standstill_s and self.phase in (IDLE, HOLD, STOP, PARK):
+            self._estimate_slope(y.ax)  # braked and at rest: ax reads the slope
         getattr(self, f"_{self.phase}")(y)
         return Commands(self.gear, self.torque, self.decel, self.steer)
 
@@ -115,14 +137,14 @@ class ApsDriver:
         self.phase, self.t_phase = phase, 0.0
 
     def _idle(self, y: PlantOutput) -> None:
-        self.torque, self.decel = 0.0, -self.p.hold_decel
+        self.torque, self.decel = 0.0, -self._hold_decel()
         if self.t_phase >= self.plan.idle_start_s:
             self._goto(HOLD)
 
     def _hold(self, y: PlantOutput) -> None:
         """At standstill: keep braking, engage the segment's gear, turn to its start angle."""
         seg = self.segment
-        self.torque, self.decel = 0.0, -self.p.hold_decel
+        self.torque, self.decel = 0.0, -self._hold_decel()
         if self._still >= self.p.standstill_s:
             self.gear = seg.direction
         self._slew(seg.steer_start_deg)
@@ -133,9 +155,15 @@ class ApsDriver:
 
     def _launch(self, y: PlantOutput) -> None:
         """Release the brake request and ramp the torque request until the car moves."""
+        p, dt = self.p, self.dt
         self.decel = 0.0
-        self.torque = min(self.torque + self.p.launch_rate_nms * self.dt, self.p.launch_torque_nm)
-        self.s += abs(y.vx) * self.dt
+        target = p.launch_torque_nm + max(self._grade_force(), 0.0) / self.k_tf
+        ramp_end = target / p.launch_rate_nms + p.launch_timeout_s
+        if self.t_phase > ramp_end:  # not moving: the slope is steeper than estimated
+            self.torque += p.launch_extra_rate_nms * dt
+        else:
+            self.torque = min(self.torque + p.launch_rate_nms * dt, target)
+        self.s += abs(y.vx) * dt
         if abs(y.vx) >= BLIND_ZONE_MS:
             self.v_ref = max(y.vx * self.segment.direction, 0.0)
             self.integral = 0.0
@@ -155,6 +183,8 @@ class ApsDriver:
         self.integral += p.ki * err * dt
         self.integral = min(max(self.integral, -p.integral_max), p.integral_max)
         force = self.mass * (a_ff + p.kp * err + self.integral) + self.f_roll
+        if self.slope != 0.0:
+            force += self._grade_force()
         creep = self._creep_force(u)
         if force >= creep:
             self.torque, self.decel = force / self.k_tf, 0.0
@@ -168,7 +198,10 @@ class ApsDriver:
     def _stop(self, y: PlantOutput) -> None:
         """Brake to standstill at the end of the segment, then go to the next one."""
         seg = self.segment
-        self.torque, self.decel = 0.0, -self.p.hold_decel
+        self.torque, self.decel = 0.0, -self._hold_decel()
+        if self.t_phase > self.p.stop_timeout_s:  # still rolling: brake harder
+            self.decel -= self.p.stop_extra_rate * (self.t_phase - self.p.stop_timeout_s)
+            self.decel = max(self.decel, self.decel_floor)
         self._slew(seg.steer_end_deg)
         if self._still >= self.p.standstill_s:
             if self.seg_index + 1 < len(self.plan.segments):
@@ -181,10 +214,10 @@ class ApsDriver:
         """Hold, shift to park, release the request and idle to the end of the trial."""
         self.torque = 0.0
         if self.t_phase < self.segment.hold_s:
-            self.decel = -self.p.hold_decel
+            self.decel = -self._hold_decel()
             return
         self.gear = 0
-        self.decel = 0.0 if y.gear == 0 else -self.p.hold_decel
+        self.decel = 0.0 if y.gear == 0 else -self._hold_decel()
         if y.gear == 0 and self.t_phase >= self.segment.hold_s + self.plan.idle_end_s:
             self._goto(DONE)
 
@@ -192,6 +225,23 @@ class ApsDriver:
         self.torque, self.decel = 0.0, 0.0
 
     # ------------------------------------------------------------------ helpers
+    def _estimate_slope(self, ax_logged: float) -> None:
+        """Update the slope estimate from the logged ax (m/s²) at confirmed standstill:
+        at rest the accelerometer reads g·sin(pitch) (plus its bias)."""
+        p = self.p
+        alpha = 1.0 - math.exp(-self.dt / p.slope_filter_s)
+        self._ax_still += (ax_logged - self._ax_still) * alpha
+        est = min(max(self._ax_still / G, -1.0), 1.0)
+        self.slope = est if abs(est) >= p.slope_threshold else 0.0
+
+    def _grade_force(self) -> float:
+        """Estimated grade force (N) to overcome along the segment's direction."""
+        return self.mass * G * self.slope * self.segment.direction
+
+    def _hold_decel(self) -> float:
+        """Deceleration request (m/s², > 0) that holds the car on the estimated slope."""
+        return self.p.hold_decel + G * abs(self.slope)
+
     def _creep_force(self, u: float) -> float:
         """Calibrated creep force (N) along the gear direction at speed u (m/s)."""
         frac = min(max(1.0 - max(u, 0.0) / self.creep_fade, 0.0), 1.0)

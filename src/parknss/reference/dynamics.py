@@ -1,8 +1,12 @@
 """Vehicle-body dynamics of the reference vehicle: longitudinal with stiction, low-speed yaw.
 
-Longitudinal: m·dv/dt = F_drive - sign(v)·(F_brake + F_roll), with F_drive = gear·τ·i·η/r
-(gear 0 gives none). Brake and rolling resistance are passive: they can stop the car but
-never reverse it, and at rest they hold it as long as they exceed |F_drive| (stiction).
+Longitudinal: m·dv/dt = F_drive + F_grade - sign(v)·(F_brake + F_roll + F_drag), with
+F_drive = gear·τ·i·η/r (gear 0 gives none), F_grade = -m·g·sin θ (θ the road pitch, nose
+up > 0), F_roll = c_rr·m·g·cos θ and F_drag the extra drive-unit drag of a trial's
+conditions (0 for the nominal car). Brake, rolling resistance and drag are passive: they
+can stop the car but never reverse it, and at rest they hold it as long as they exceed
+|F_drive + F_grade| (stiction); gravity can start a car at rest (roll-back), except in
+park (gear 0 at rest: the parking lock holds it).
 Lateral: the path curvature follows the steady-state single-track value
 κ_ss = tan(δ)/(L + K_us·v²) (δ the road-wheel angle of the nonlinear rack) over the
 travelled distance with the tyre relaxation length σ, and ω = v·κ. Units: m, m/s, m/s²,
@@ -21,17 +25,25 @@ from parknss.vehicle import VehicleGeometry
 class Longitudinal:
     """Signed speed of the rear axle with a standstill (stiction) state."""
 
-    def __init__(self, p: BodyParams, dt: float) -> None:
+    def __init__(self, p: BodyParams, dt: float, drag_torque_nm: float = 0.0) -> None:
         self.dt = dt
         self.mass = p.mass_kg
         self.torque_to_force = p.drive_ratio * p.drive_efficiency / p.wheel_radius_m
-        self.f_roll = p.rolling_resistance * p.mass_kg * G
+        self.f_roll_flat = p.rolling_resistance * p.mass_kg * G
+        self.f_roll = self.f_roll_flat
+        self.f_grade = 0.0
+        self.f_drag = drag_torque_nm * p.drive_ratio / p.wheel_radius_m
         self.vx = 0.0
         self.accel = 0.0
         self.at_rest = True
 
     def reset(self, vx: float = 0.0) -> None:
         self.vx, self.accel, self.at_rest = vx, 0.0, vx == 0.0
+
+    def set_grade(self, pitch: float) -> None:
+        """Road pitch in rad under the car (nose up > 0) for the next steps."""
+        self.f_grade = -self.mass * G * math.sin(pitch)
+        self.f_roll = self.f_roll_flat * math.cos(pitch)
 
     def drive_force(self, torque: float, gear: int) -> float:
         """Tractive force in N, signed along the body x axis."""
@@ -42,22 +54,22 @@ class Longitudinal:
 
         Returns the new signed speed (m/s); ``accel`` holds the mean dv/dt of the step.
         """
-        f_drive = self.drive_force(torque, gear)
-        f_resist = brake_force + self.f_roll
+        f_active = self.drive_force(torque, gear) + self.f_grade
+        f_resist = brake_force + self.f_roll + self.f_drag
         v0 = self.vx
         if self.at_rest:
-            if abs(f_drive) <= f_resist:
+            if gear == 0 or abs(f_active) <= f_resist:
                 self.accel = 0.0
                 return 0.0
-            a = (f_drive - math.copysign(f_resist, f_drive)) / self.mass
+            a = (f_active - math.copysign(f_resist, f_active)) / self.mass
             self.vx, self.accel, self.at_rest = a * self.dt, a, False
             return self.vx
-        a = (f_drive - math.copysign(f_resist, v0)) / self.mass
+        a = (f_active - math.copysign(f_resist, v0)) / self.mass
         v1 = v0 + a * self.dt
         if v1 * v0 <= 0.0:
             # the speed reaches zero within this step: the car comes to rest. Passive forces
-            # cannot push it further; a drive force opposing the motion may break it away
-            # the other way from rest on the next step (stiction logic above).
+            # cannot push it further; a drive or gravity force opposing the motion may break
+            # it away the other way from rest on the next step (stiction logic above).
             v1 = 0.0
             self.at_rest = True
         self.accel = (v1 - v0) / self.dt

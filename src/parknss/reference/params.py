@@ -10,11 +10,14 @@ them all; load a variant with :func:`load_vehicle_params`.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 
 from pydantic import Field
 
 from parknss.config import StrictModel, load_config, override
+from parknss.reference.conditions import ConditionsConfig
 from parknss.signals import BLIND_ZONE_KMH
 from parknss.vehicle import VehicleGeometry
 
@@ -178,7 +181,9 @@ class BusParams(StrictModel):
 
 
 class ReferenceVehicleParams(StrictModel):
-    """Every parameter of the synthetic reference vehicle (see docs/reference.md)."""
+    """Every parameter of the synthetic reference vehicle (see docs/reference.md), and the
+    ``conditions`` block its campaigns draw per-trial conditions from
+    (:mod:`parknss.reference.conditions`)."""
 
     vehicle_id: str = Field("reference-es", description="vehicle id written into trials")
     seed: int = Field(0, description="base seed of the sensor noise")
@@ -193,9 +198,17 @@ class ReferenceVehicleParams(StrictModel):
     imu: ImuParams = ImuParams()
     wheel_speed: WheelSpeedParams = WheelSpeedParams()
     bus: BusParams = BusParams()
+    conditions: ConditionsConfig = ConditionsConfig()
 
     def to_geometry(self) -> VehicleGeometry:
         return self.geometry.to_geometry()
+
+    def digest(self) -> str:
+        """Stable short hash of the vehicle's own parameters. The ``conditions`` block is
+        left out: it says how trials are drawn, not what the car is (a campaign records
+        the drawn conditions per trial and the block's digest in its meta)."""
+        blob = json.dumps(self.model_dump(mode="json", exclude={"conditions"}), sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
     def replace(self, **groups: dict) -> ReferenceVehicleParams:
         """A copy with some fields of some groups changed: ``replace(drive={"delay_s": 0})``."""

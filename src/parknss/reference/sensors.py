@@ -23,14 +23,31 @@ class Imu:
     """Accelerometer and gyro on the sprung body, ahead of the rear axle.
 
     The body pitch follows ``pitch_gradient·ax`` through a first-order lag (and roll
-    ``roll_gradient·ay`` likewise), so the accelerometer reads specific force
-    f_x = ax + g·sin(pitch), f_y = ay + g·sin(roll), rotated by the mounting yaw, plus
-    bias and white noise. The gyro reads ω + bias + noise.
+    ``roll_gradient·ay`` likewise); on a road of pitch θ and bank φ (a trial's floor) the
+    accelerometer reads the specific force f_x = ax + g·sin(pitch + θ),
+    f_y = ay + g·sin(roll + φ), f_z = g·cos(pitch + θ)·cos(roll + φ), turned into the
+    sensor frame by the misalignment (pitch ``pitch_rad`` and roll ``roll_rad`` of a
+    trial's conditions, then the mounting yaw), plus bias and white noise. The gyro reads
+    ω + bias + drift·t + noise (t the time since reset).
     """
 
-    def __init__(self, p: ImuParams, dt: float, rng: random.Random) -> None:
+    def __init__(
+        self,
+        p: ImuParams,
+        dt: float,
+        rng: random.Random,
+        roll_rad: float = 0.0,
+        pitch_rad: float = 0.0,
+        drift: float = 0.0,
+    ) -> None:
         self.p = p
         self.rng = rng
+        self.dt = dt
+        self.tilted = roll_rad != 0.0 or pitch_rad != 0.0
+        self.cr, self.sr = math.cos(roll_rad), math.sin(roll_rad)
+        self.cp, self.sp = math.cos(pitch_rad), math.sin(pitch_rad)
+        self.drift = drift  # yaw-rate bias change, rad/s per s
+        self.n = 0
         self.alpha = 1.0 - math.exp(-dt / p.pitch_lag_s)
         self.k_pitch = deg_to_rad(p.pitch_gradient_deg)
         self.k_roll = deg_to_rad(p.roll_gradient_deg)
@@ -40,18 +57,27 @@ class Imu:
         self.roll = 0.0
 
     def reset(self) -> None:
-        self.pitch, self.roll = 0.0, 0.0
+        self.pitch, self.roll, self.n = 0.0, 0.0, 0
 
-    def step(self, ax: float, ay: float, yaw_rate: float) -> tuple[float, float, float]:
-        """True IMU-point accelerations (m/s²) and yaw rate (rad/s) -> logged (ax, ay, ω)."""
+    def step(
+        self, ax: float, ay: float, yaw_rate: float, grade: float = 0.0, bank: float = 0.0
+    ) -> tuple[float, float, float]:
+        """True IMU-point accelerations (m/s²) and yaw rate (rad/s) on a road of pitch
+        ``grade`` and bank ``bank`` (rad) -> logged (ax, ay, ω)."""
         p, rng = self.p, self.rng
         self.pitch += (self.k_pitch * ax - self.pitch) * self.alpha
         self.roll += (self.k_roll * ay - self.roll) * self.alpha
-        fx = ax + G * math.sin(self.pitch)
-        fy = ay + G * math.sin(self.roll)
+        fx = ax + G * math.sin(self.pitch + grade)
+        fy = ay + G * math.sin(self.roll + bank)
+        if self.tilted:
+            fz = G * math.cos(self.pitch + grade) * math.cos(self.roll + bank)
+            fx, fz = self.cp * fx + self.sp * fz, self.cp * fz - self.sp * fx
+            fy = self.cr * fy + self.sr * fz
         ax_m = self.c * fx + self.s * fy + p.ax_bias + rng.gauss(0.0, p.ax_noise)
         ay_m = -self.s * fx + self.c * fy + p.ay_bias + rng.gauss(0.0, p.ay_noise)
-        w_m = yaw_rate + p.yaw_rate_bias + rng.gauss(0.0, p.yaw_rate_noise)
+        bias = p.yaw_rate_bias + self.drift * (self.n * self.dt)
+        self.n += 1
+        w_m = yaw_rate + bias + rng.gauss(0.0, p.yaw_rate_noise)
         return ax_m, ay_m, w_m
 
 

@@ -12,6 +12,12 @@ Per 10 ms step, under the commands {gear, torque_cmd, decel_cmd, steer_cmd}:
    accelerations are formed: ax = dv/dt - x_imu·ω², ay = vx·ω + x_imu·dω/dt;
 4. the sensors turn truth into the logged output (quantization, blind zone, noise).
 
+A trial's :class:`~parknss.reference.conditions.TrialConditions` (optional) change the
+parameters (mass, rolling radius and resistance, brake, IMU biases) and add the floor's
+grade, the wheel-speed scale, the drive-unit drag, the battery power limit, the sensor
+misalignment and the gyro drift (:mod:`parknss.reference.environment`); without them the
+car is the nominal one on a flat floor.
+
 ``step`` returns the logged :class:`~parknss.plant.PlantOutput`; ``last_truth`` holds
 the noise-free one. ``simulate`` runs a whole command array in one call.
 """
@@ -32,7 +38,9 @@ from parknss.reference.actuators import (
     GearSelector,
     SteeringActuator,
 )
+from parknss.reference.conditions import TrialConditions
 from parknss.reference.dynamics import Lateral, Longitudinal
+from parknss.reference.environment import Road, trial_environment
 from parknss.reference.params import ReferenceVehicleParams
 from parknss.reference.sensors import Bus, Imu, WheelSpeed
 from parknss.signals import DT, TRUTH_PREFIX
@@ -71,14 +79,23 @@ class ReferenceVehicle:
         params: vehicle parameters (defaults: configs/reference_vehicle.yaml values).
         seed: noise seed; None uses ``params.seed``. ``reset`` restarts the noise stream,
             so equal seeds give bit-identical runs.
+        conditions: the trial's conditions (None: nominal car, flat floor). ``params``
+            stays the nominal vehicle; ``env.params`` holds the trial's effective one.
     """
 
     dt: float = DT
 
-    def __init__(self, params: ReferenceVehicleParams | None = None, seed: int | None = None):
+    def __init__(
+        self,
+        params: ReferenceVehicleParams | None = None,
+        seed: int | None = None,
+        conditions: TrialConditions | None = None,
+    ):
         self.params = params or ReferenceVehicleParams()
         self.seed = self.params.seed if seed is None else int(seed)
-        p, dt = self.params, self.dt
+        self.conditions = conditions
+        self.env = env = trial_environment(self.params, conditions)
+        p, dt = env.params, self.dt
         self.geometry = p.to_geometry()
         self.rng = random.Random(self.seed)
         self.gearbox = GearSelector(p.gear, dt)
@@ -86,11 +103,14 @@ class ReferenceVehicle:
         self.autohold = AutoHold(p.autohold, dt)
         self.brake = BrakeActuator(p.brake, dt)
         self.steering = SteeringActuator(p.steering, p.geometry.steer_lock_deg, dt)
-        self.long = Longitudinal(p.body, dt)
+        self.long = Longitudinal(p.body, dt, env.drag_torque_nm)
         self.lat = Lateral(p.lateral, self.geometry, dt)
-        self.imu = Imu(p.imu, dt, self.rng)
+        self.imu = Imu(p.imu, dt, self.rng, env.imu_roll_rad, env.imu_pitch_rad, env.gyro_drift)
         self.wheel = WheelSpeed(p.wheel_speed, self.rng)
         self.bus = Bus(p.bus, self.rng)
+        self.road = Road(env.floor) if env.floor is not None else None
+        self.power_limited = env.power_limit_w != float("inf")
+        self.force_per_bar = p.brake.force_per_bar
         self.x_imu = p.imu.x_offset_m
         self.last_truth: PlantOutput | None = None
         self.last_output: PlantOutput | None = None
@@ -122,6 +142,8 @@ class ReferenceVehicle:
         self.long.reset(float(vx))
         self.lat.reset(float(yaw_rate), float(vx))
         self.imu.reset()
+        if self.road is not None:
+            self.road.reset()
         return self._emit(gear, self.drive.torque, 0.0, self.steering.angle)
 
     def step(self, cmd: Commands) -> PlantOutput:
@@ -207,13 +229,19 @@ class ReferenceVehicle:
             float(torque_cmd), float(decel_cmd), float(steer_cmd)
         )
         v0 = self.long.vx
+        if self.road is not None:
+            self.long.set_grade(self.road.pitch)
+        if self.power_limited:
+            self.drive.limit = self.env.torque_available(v0)
         gear = self.gearbox.step(gear_req, v0)
         torque = self.drive.step(torque_cmd, gear, self.gearbox.shifting, v0)
         floor = self.autohold.step(v0, self.brake.pressure, torque, gear)
         pressure = self.brake.step(decel_cmd, floor)
         steer = self.steering.step(steer_cmd)
-        vx = self.long.step(torque, gear, pressure * self.params.brake.force_per_bar)
-        self.lat.step(vx, steer)
+        vx = self.long.step(torque, gear, pressure * self.force_per_bar)
+        w = self.lat.step(vx, steer)
+        if self.road is not None:
+            self.road.step(vx, w, self.dt)
         self._emit(gear, torque, pressure, steer)
 
     def _emit(self, gear: int, torque: float, pressure: float, steer: float) -> PlantOutput:
@@ -222,13 +250,16 @@ class ReferenceVehicle:
         ax = self.long.accel - self.x_imu * w * w
         ay = vx * w + self.x_imu * dw
         self.last_truth = PlantOutput(gear, torque, pressure, steer, vx, w, ax, ay)
-        ax_m, ay_m, w_m = self.imu.step(ax, ay, w)
+        if self.road is not None:
+            ax_m, ay_m, w_m = self.imu.step(ax, ay, w, self.road.pitch, self.road.bank)
+        else:
+            ax_m, ay_m, w_m = self.imu.step(ax, ay, w)
         self.last_output = PlantOutput(
             gear,
             self.bus.torque(torque),
             self.bus.pressure(pressure),
             self.bus.steer(steer),
-            self.wheel.read(vx),
+            self.wheel.read(vx * self.env.speed_scale),
             w_m,
             ax_m,
             ay_m,

@@ -8,6 +8,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from parknss.outputs import write_text_atomic
+
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:3px 8px;
@@ -75,6 +77,4 @@ def write_report(
     parts.append(
         "<h2>Run</h2><pre>" + html.escape(json.dumps(meta, indent=2, default=str)) + "</pre>"
     )
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(parts))
-    return path
+    return write_text_atomic(path, "\n".join(parts))

@@ -10,6 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from parknss.outputs import atomic_file
+
 
 def shade_reverse(ax, t: np.ndarray, gear: np.ndarray, color: str = "0.85") -> None:
     """Shade the time spans where gear == -1 on a matplotlib axis. t in s, shape (T,)."""
@@ -22,9 +24,12 @@ def shade_reverse(ax, t: np.ndarray, gear: np.ndarray, color: str = "0.85") -> N
 
 
 def save(fig, path: str | Path, dpi: int = 120) -> Path:
-    """Save a figure as PNG (creating folders) and close it."""
+    """Save a figure as PNG (creating folders; atomically, so an earlier figure at
+    ``path`` stays whole if saving fails) and close it."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_file(p) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return p

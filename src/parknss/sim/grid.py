@@ -6,13 +6,13 @@ and executed under every plant; a job returns one JSON row per (cell, plant).
 :func:`summarize` aggregates the rows of one plant into the Table V statistics
 (:class:`GridSummary`), :func:`grid_report` per plant and, on the robustness grid, per
 perturbation; :func:`table_v` renders them as text. :func:`run_grid_report` is the whole
-``parknss grid`` job: run, summarise, write the per-cell CSV and the JSON report.
+``parknss grid`` job: run, summarise, write the per-cell CSV and the JSON report into its
+run folder (:func:`parknss.outputs.run_folder`).
 """
 
 from __future__ import annotations
 
 import csv
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from parknss.config import override
+from parknss.outputs import atomic_file, run_folder
 from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.session import check_plants, run_cell
@@ -224,9 +225,8 @@ def table_v(summaries: dict, heldout: dict | None = None) -> str:
 
 def write_rows_csv(rows: list[dict], path: Path) -> None:
     """The per-(cell, plant) rows as one CSV (columns of the first row)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     cols = list(rows[0]) if rows else []
-    with path.open("w", newline="") as fh:
+    with atomic_file(path) as tmp, tmp.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=cols)
         w.writeheader()
         w.writerows(rows)
@@ -242,26 +242,36 @@ def run_grid_report(
     executor: str = "local",
     workers: int = 1,
     address: str | None = None,
+    overwrite: bool = False,
 ) -> dict:
     """``parknss grid``: run grid ``grid`` ("36", "12", "252"; ``cells``: a subset such as
     "0-5,9") under ``plants``, write ``grid_<grid>_cells.csv`` and ``grid_<grid>.json``
-    to ``out``; the report (Table V summaries, wall and simulated seconds, the CSV path)."""
+    to the run folder ``out`` (refused if it holds anything but the same grid run, unless
+    ``overwrite``); the report (Table V summaries, wall and simulated seconds, the CSV
+    path)."""
     files = files or SimConfigFiles()
     cfg = files.closed_loop_config()
     check_plants(plants, cfg)  # fail fast, before any cell runs
     idx = sc.grid_cells(grid, files.scenarios_config(), cells)
-    t0 = time.perf_counter()
-    rows = run_grid(grid, plants, idx, workers, files=files, executor=executor, address=address)
-    wall = time.perf_counter() - t0
-    doc = {"grid": grid, "plants": plants, "cells": len(idx), "workers": workers}
-    doc.update(grid_report(rows, plants, grid, cfg.clearance_floor_cm))
-    sim = sum(r["duration_s"] for r in rows)
-    doc["wall_s"] = round(wall, 2)
-    doc["sim_s"] = round(sim, 2)
-    doc["realtime_factor_wall"] = round(sim / wall, 2) if wall > 0 else None
-    csv_path = out / f"grid_{grid}_cells.csv"
-    write_rows_csv(rows, csv_path)
-    doc["csv"] = str(csv_path)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"grid_{grid}.json").write_text(json.dumps(doc, indent=2))
+    identity = {"grid": grid, "plants": plants, "cells": idx, **config_paths(files)}
+    with run_folder(out, command="parknss grid", args=identity, overwrite=overwrite) as run:
+        t0 = time.perf_counter()
+        rows = run_grid(grid, plants, idx, workers, files=files, executor=executor,
+                        address=address)
+        wall = time.perf_counter() - t0
+        doc = {"grid": grid, "plants": plants, "cells": len(idx), "workers": workers}
+        doc.update(grid_report(rows, plants, grid, cfg.clearance_floor_cm))
+        sim = sum(r["duration_s"] for r in rows)
+        doc["wall_s"] = round(wall, 2)
+        doc["sim_s"] = round(sim, 2)
+        doc["realtime_factor_wall"] = round(sim / wall, 2) if wall > 0 else None
+        csv_path = out / f"grid_{grid}_cells.csv"
+        write_rows_csv(rows, csv_path)
+        doc["csv"] = str(csv_path)
+        run.write_json(f"grid_{grid}.json", doc)
     return doc
+
+
+def config_paths(files: SimConfigFiles) -> dict[str, Path | None]:
+    """The config files of a simulator run as paths (a run folder's manifest arguments)."""
+    return {f"{k}_config": None if v is None else Path(v) for k, v in files.to_json().items()}

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from parknss.outputs import atomic_file
 from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import (
     ClosedLoopConfig,
@@ -128,10 +129,10 @@ class SceneRun:
 
 def write_series(series: dict[str, np.ndarray], path: Path) -> None:
     """One CSV with a header of the column names and one row per 10 ms sample."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     cols = list(series)
     mat = np.column_stack([series[c] for c in cols])
-    np.savetxt(path, mat, delimiter=",", header=",".join(cols), comments="", fmt="%.6g")
+    with atomic_file(path) as tmp:
+        np.savetxt(tmp, mat, delimiter=",", header=",".join(cols), comments="", fmt="%.6g")
 
 
 def simulate_scene(

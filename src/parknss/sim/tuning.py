@@ -27,9 +27,10 @@ from pydantic import Field
 
 from parknss.config import StrictModel, override
 from parknss.errors import ConfigError, ParknssError
+from parknss.outputs import run_folder, write_text_atomic
 from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.control.interface import InterfaceConfig
-from parknss.sim.grid import run_grid
+from parknss.sim.grid import config_paths, run_grid
 from parknss.sim.plants import parse_plants
 from parknss.sim.scenarios import grid_cells
 from parknss.sim.session import check_plants
@@ -133,7 +134,6 @@ def write_tuned(
 ) -> Path:
     """Write the full interface config with the tuned gains as YAML (a configs/ drop-in)."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     gains = {k: float(f"{v:.6g}") for k, v in result.gains.items()}
     tuned = override(start, gains, source="tuned gains")
     head = (
@@ -141,8 +141,7 @@ def write_tuned(
         f"# objective {result.initial_objective:.3f} -> {result.objective:.3f} "
         f"in {result.evaluations} evaluations. {note}\n"
     )
-    p.write_text(head + yaml.safe_dump(tuned.model_dump(), sort_keys=False))
-    return p
+    return write_text_atomic(p, head + yaml.safe_dump(tuned.model_dump(), sort_keys=False))
 
 
 def tune_gains(
@@ -155,11 +154,14 @@ def tune_gains(
     workers: int = 1,
     address: str | None = None,
     log: Callable[[str], None] | None = None,
+    overwrite: bool = False,
 ) -> dict:
     """``parknss tune``: coordinate descent of the interface gains on the 12-cell core
     under ``plant`` (None: the chain if it can be built here, else the reference
-    vehicle); writes ``interface_tuned.yaml`` and ``tune.json`` to ``out`` and returns the
-    summary (gains, objective history, evaluations, wall s)."""
+    vehicle); writes ``interface_tuned.yaml`` and ``tune.json`` to the run folder ``out``
+    (:func:`parknss.outputs.run_folder`: refused if it holds anything but the same tuning
+    run, unless ``overwrite``) and returns the summary (gains, objective history,
+    evaluations, wall s)."""
     files = files or SimConfigFiles()
     say = log or (lambda _msg: None)
     cfg = files.closed_loop_config()
@@ -192,10 +194,14 @@ def tune_gains(
         say(f"{json.dumps({k: round(v, 4) for k, v in gains.items()})} -> {value:.3f}")
         return value
 
-    t0 = time.perf_counter()
-    result = coordinate_descent(evaluate, start, tcfg, say)
-    path = write_tuned(result, start, out / "interface_tuned.yaml", f"plant {kind}, core cells.")
-    doc = result.to_json()
-    doc.update(plant=kind, yaml=str(path), cells=cells, wall_s=round(time.perf_counter() - t0, 1))
-    (out / "tune.json").write_text(json.dumps(doc, indent=2))
+    identity = {"plant": kind, "rounds": tcfg.rounds, **config_paths(files)}
+    with run_folder(out, command="parknss tune", args=identity, overwrite=overwrite) as run:
+        t0 = time.perf_counter()
+        result = coordinate_descent(evaluate, start, tcfg, say)
+        note = f"plant {kind}, core cells."
+        path = write_tuned(result, start, out / "interface_tuned.yaml", note)
+        doc = result.to_json()
+        doc.update(plant=kind, yaml=str(path), cells=cells,
+                   wall_s=round(time.perf_counter() - t0, 1))
+        run.write_json("tune.json", doc)
     return doc

@@ -1004,9 +1004,12 @@ function saveScene() {
 
 function wire() {
   $("grid").addEventListener("change", async (ev) => {
-    // keep the base cell: robust index = 36 · variant + cell, so cell i <-> variant 0 of i
+    // keep the base cell: robust index = 36 · variant + cell, so cell i <-> variant 0 of i.
+    // Custom or not is read from the selector: state.custom stays true until a cell picked
+    // a moment ago has loaded, and reading it here reset that cell to 0.
     state.grid = ev.target.value;
-    state.index = state.custom ? 0 : state.index % state.health.grids["36"];
+    const custom = $("cell").value === "custom";
+    state.index = custom ? 0 : state.index % state.health.grids["36"];
     try {
       await loadCells();
       await loadCell();

@@ -1,0 +1,124 @@
+"""The studies end to end on a tiny campaign (16 trials of ~430 samples, 4-unit nets,
+1-3 epochs): split sizes, determinism across executors, cache resume, limiter variants."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from helpers.experiments import tiny_setup
+from parknss.experiments.ablations import ablations, n_fits
+from parknss.experiments.config import load_experiments_config
+from parknss.experiments.convergence import convergence
+from parknss.experiments.learning_curve import learning_curve
+from parknss.experiments.limiter_study import limiter_study
+from parknss.experiments.noise import NoiseFloor, seed_noise
+from parknss.experiments.sweep import Sweep
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    data, cfg_path = tiny_setup(tmp_path_factory.mktemp("tiny"))
+    return str(data), load_experiments_config(cfg_path)
+
+
+def _sweep(data, **kw) -> Sweep:
+    return Sweep(data=data, progress=False, **{"workers": 1, **kw})
+
+
+def test_learning_curve_sizes_and_fit(tiny):
+    data, cfg = tiny
+    res = learning_curve(cfg, False, _sweep(data))
+    assert res.sizes() == [4, 8, 12]
+    assert [p.r for p in res.points] == [3, 2, 1]
+    for p in res.points:
+        assert len(p.scores) == len(cfg.full.folds)
+        assert all(s.n_train == p.n_train for s in p.scores)
+        assert all(math.isfinite(v) and v > 0 for v in p.values("vx"))
+    assert set(res.fits) == {"vx", "yaw"}
+    # the extrapolation is the fit at 16, not a measurement
+    assert res.extrapolated("vx") == pytest.approx(float(res.fits["vx"](16)))
+
+
+def test_seed_noise_pool_equals_in_process_and_resumes(tiny, tmp_path, monkeypatch):
+    data, cfg = tiny
+    serial = seed_noise(cfg, False, _sweep(data, cache_dir=tmp_path))
+    pooled = seed_noise(cfg, False, _sweep(data, workers=2))
+    assert [s.vx for s in serial.scores] == [s.vx for s in pooled.scores]
+    assert [s.yaw for s in serial.scores] == [s.yaw for s in pooled.scores]
+    assert len({s.vx for s in serial.scores}) == len(cfg.full.seeds)  # seeds matter
+    assert serial.floor.vx == pytest.approx(pooled.floor.vx) and serial.floor.vx > 0
+
+    def boom(**kw):
+        raise AssertionError("a finished fold was recomputed")
+
+    monkeypatch.setattr("parknss.experiments.folds.fold_job", boom)
+    again = seed_noise(cfg, False, _sweep(data, cache_dir=tmp_path))
+    assert [s.vx for s in again.scores] == [s.vx for s in serial.scores]
+
+
+@pytest.mark.slow
+def test_seed_noise_under_ray_matches_local(tiny):
+    pytest.importorskip("ray")
+    data, cfg = tiny
+    local = seed_noise(cfg, True, _sweep(data))
+    remote = seed_noise(cfg, True, _sweep(data, executor="ray", workers=2))
+    assert [s.vx for s in local.scores] == [s.vx for s in remote.scores]
+    assert [s.yaw for s in local.scores] == [s.yaw for s in remote.scores]
+
+
+def test_ablations_share_the_baseline_and_sweep_lr(tiny):
+    data, cfg = tiny
+    floor = NoiseFloor(0.02, 0.035, 5, "measured")
+    sweep = _sweep(data)
+    res = ablations(cfg, False, sweep, floor)
+    # baseline shared by 3 axes, MAE at the default LR is the baseline: 1 + MSE x 2 LRs
+    # + MAE at the other LR + longest window + direct yaw
+    assert n_fits(cfg, False, sweep) == 6
+    base = [ax.baseline() for ax in res.axes]
+    assert all(b.mean("vx") == base[0].mean("vx") for b in base[1:] if b.lr in (None, 2e-3))
+    loss = res.axis("loss")
+    for opt in loss.options:
+        assert set(opt.lr_sweep) == {1e-3, 2e-3}
+        assert opt.lr_sweep[opt.lr] == min(opt.lr_sweep.values())
+        assert opt.mean("vx") == pytest.approx(opt.lr_sweep[opt.lr])
+    win = res.axis("training window")
+    assert win.effect("shortest", "vx") == 0.0
+    longest = next(o for o in win.options if o.label == "longest")
+    assert longest.windows[0] > next(o for o in win.options if o.deployed).windows[0]
+
+
+def test_limiter_variants_share_one_model(tiny):
+    data, cfg = tiny
+    floor = NoiseFloor(0.02, 0.035, 5, "measured")
+    res = limiter_study(cfg, True, _sweep(data), floor)
+    assert [v.variant for v in res.variants] == ["none", "reconstructed", "residual"]
+    assert res.effect("none", "vx") == 0.0
+    assert all(math.isfinite(v.vx) for v in res.variants[:2])
+
+
+def test_limiter_job_unlimited_equals_the_fold_errors(tiny):
+    from parknss.experiments.limiter_study import limiter_job
+
+    data, _ = tiny
+    out = limiter_job(
+        split="cv",
+        index=0,
+        data=data,
+        overrides={
+            "model": {"state_layers": 1, "state_units": 4, "output_layers": 1, "output_units": 4},
+            "train": {"epochs": 1},
+        },
+    )
+    fold, none = out["fold"]["errors"], out["variants"]["none"]
+    assert none["vx_mse_moving_kmh2"] == pytest.approx(fold["vx_mse_moving_kmh2"], rel=1e-6)
+    assert out["fold"]["model_dir"] is None
+
+
+def test_convergence_history_marks_the_optimum(tiny):
+    data, cfg = tiny
+    res = convergence(cfg, False, _sweep(data))
+    assert res.epochs == list(range(1, cfg.full.convergence_epochs + 1))
+    assert len(res.raw) == len(res.smooth) == len(res.output) == len(res.epochs)
+    assert res.best_epoch == res.epochs[res.smooth.index(min(res.smooth))]

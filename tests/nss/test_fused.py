@@ -1,0 +1,178 @@
+"""The fused Euler rollout and fused output MLP against autograd (float64, tiny sizes)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from helpers.synth import make_campaign, tiny_model
+from parknss.data.windows import whole_trials
+from parknss.nss.fused import FusedEulerRollout, euler_forward
+from parknss.nss.fused_mlp import FusedTanhMLP
+from parknss.nss.workspace import WORKSPACE
+
+F64 = torch.float64
+
+
+def _rand(*shape, scale=0.5, gen):
+    return (torch.randn(*shape, generator=gen, dtype=F64) * scale).requires_grad_(True)
+
+
+def _euler_args(B=2, T=6, H=4, m=4, hidden_layers=1, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    x0 = _rand(B, 2, gen=g)
+    U = _rand(T - 1, B, m, gen=g)
+    W0, b0 = _rand(H, 2 + m, gen=g), _rand(H, gen=g)
+    Wout, bout = _rand(2, H, gen=g), _rand(2, gen=g)
+    hidden = []
+    for _ in range(hidden_layers):
+        hidden += [_rand(H, H, gen=g), _rand(H, gen=g)]
+    return x0, U, W0, b0, Wout, bout, hidden
+
+
+def _euler_reference(dt, x0, U, W0, b0, Wout, bout, *hidden):
+    """The recurrence in plain autograd: x+ = x + dt·(Wout·tanh(...tanh(W0[x,u]+b0)) + bout)."""
+    xs = [x0]
+    x = x0
+    for k in range(U.shape[0]):
+        h = torch.tanh(torch.cat([x, U[k]], dim=1) @ W0.t() + b0)
+        for W, b in zip(hidden[0::2], hidden[1::2], strict=True):
+            h = torch.tanh(h @ W.t() + b)
+        x = x + dt * (h @ Wout.t() + bout)
+        xs.append(x)
+    return torch.stack(xs)
+
+
+@pytest.mark.parametrize("hidden_layers", [0, 1, 2])
+def test_fused_euler_gradcheck(hidden_layers):
+    dt = 0.1  # large enough that every term of the BPTT matters
+    x0, U, W0, b0, Wout, bout, hidden = _euler_args(hidden_layers=hidden_layers)
+    inputs = (x0, U, W0, b0, Wout, bout, *hidden)
+    assert torch.autograd.gradcheck(
+        lambda *a: FusedEulerRollout.apply(dt, *a), inputs, eps=1e-6, atol=1e-8
+    )
+    # and the values are the recurrence itself
+    X = FusedEulerRollout.apply(dt, *inputs)
+    torch.testing.assert_close(X, _euler_reference(dt, *inputs), rtol=0, atol=1e-13)
+    assert torch.equal(X[0], x0)
+    Xn = euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], dt=dt)
+    torch.testing.assert_close(Xn, X.detach(), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("layers", [1, 2, 3])
+def test_fused_mlp_gradcheck(layers):
+    g = torch.Generator().manual_seed(1)
+    N, n_in, H = 7, 5, 4
+    x = _rand(N, n_in, gen=g)
+    params = []
+    width = n_in
+    for _ in range(layers):
+        params += [_rand(H, width, gen=g), _rand(H, gen=g)]
+        width = H
+    params += [_rand(2, H, gen=g), _rand(2, gen=g)]
+    assert torch.autograd.gradcheck(FusedTanhMLP.apply, (x, *params), eps=1e-6, atol=1e-8)
+    ref = x
+    for W, b in zip(params[0:-2:2], params[1:-2:2], strict=True):
+        ref = torch.tanh(ref @ W.t() + b)
+    ref = ref @ params[-2].t() + params[-1]
+    torch.testing.assert_close(FusedTanhMLP.apply(x, *params), ref, rtol=0, atol=1e-14)
+
+
+def _case(**model):
+    camp = make_campaign(120, reps=1)
+    m, _ = tiny_model(camp, seed=3, model=model)
+    w = whole_trials(list(camp))
+    x0 = torch.as_tensor(w.states[:, 0])
+    u = torch.as_tensor(w.inputs)
+    return m, x0, u
+
+
+def _loss(r):
+    # touches every readout channel, with nonuniform weights so no gradient cancels
+    k = torch.linspace(0.5, 1.5, r.vx.shape[1], dtype=F64)
+    return (
+        ((r.vx_s * k) ** 2).sum() + (r.yaw_s * k).pow(2).sum() + r.ax_s.sum() + r.ay_s.pow(3).sum()
+    )
+
+
+def _grads(m, x0, u, engine):
+    m.zero_grad(set_to_none=True)
+    u = u.clone().requires_grad_(True)
+    r = m.rollout(x0, u, engine=engine)
+    _loss(r).backward()
+    return r, {n: p.grad.clone() for n, p in m.named_parameters()}, u.grad.clone()
+
+
+@pytest.mark.parametrize("residual_yaw", [True, False])
+def test_fused_equals_eager_outputs_and_gradients(residual_yaw):
+    m, x0, u = _case(residual_yaw=residual_yaw)
+    assert m.engine_for(None) == "fused"
+    rf, gf, guf = _grads(m, x0, u, "fused")
+    re, ge, gue = _grads(m, x0, u, "eager")
+    for name in ("vx", "yaw_rate", "ax", "ay", "state_s"):
+        torch.testing.assert_close(getattr(rf, name), getattr(re, name), rtol=0, atol=1e-12)
+    assert set(gf) == set(ge) == {n for n, _ in m.named_parameters()}
+    for n in gf:
+        assert gf[n].abs().max() > 0, n
+        torch.testing.assert_close(gf[n], ge[n], rtol=1e-10, atol=1e-10, msg=n)
+    assert guf.abs().max() > 0
+    torch.testing.assert_close(guf, gue, rtol=1e-10, atol=1e-10)
+
+
+def test_fused_equals_eager_in_float32():
+    """The training dtype: same numbers up to float32 rounding."""
+    camp = make_campaign(120, reps=1)
+    m, _ = tiny_model(camp, seed=3, dtype="float32")
+    w = whole_trials(list(camp))
+    x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
+    rf, gf, _ = _grads(m, x0, u, "fused")
+    re, ge, _ = _grads(m, x0, u, "eager")
+    assert rf.vx.dtype == torch.float32
+    torch.testing.assert_close(rf.state_s, re.state_s, rtol=0, atol=1e-5)
+    for n in gf:
+        torch.testing.assert_close(gf[n], ge[n], rtol=0, atol=1e-5 * float(ge[n].abs().max()))
+
+
+def test_fused_input_gradient_with_frozen_weights():
+    """Gradients w.r.t. the inputs flow through the fused rollout of a frozen model."""
+    m, x0, u = _case()
+    m.requires_grad_(False)
+    outs = []
+    for engine in ("fused", "eager"):
+        uu = u.clone().requires_grad_(True)
+        r = m.rollout(x0, uu, engine=engine)
+        _loss(r).backward()
+        outs.append(uu.grad)
+    torch.testing.assert_close(outs[0], outs[1], rtol=1e-10, atol=1e-10)
+
+
+def test_no_grad_path_equals_grad_path():
+    m, x0, u = _case()
+    r_grad = m.rollout(x0, u, engine="fused")
+    with torch.no_grad():
+        r_ng = m.rollout(x0, u, engine="fused")
+        r_eager = m.rollout(x0, u, engine="eager")
+    assert r_ng.vx.grad_fn is None
+    for name in ("vx", "yaw_rate", "ax", "ay"):
+        torch.testing.assert_close(
+            getattr(r_ng, name), getattr(r_grad, name).detach(), rtol=0, atol=1e-13
+        )
+        torch.testing.assert_close(getattr(r_ng, name), getattr(r_eager, name), rtol=0, atol=1e-12)
+
+
+def test_workspace_buffers_are_recycled():
+    m, x0, u = _case()
+    WORKSPACE.clear()
+
+    def epoch():
+        m.zero_grad(set_to_none=True)
+        loss = _loss(m.rollout(x0, u, engine="fused"))
+        loss.backward()
+        del loss
+        return {id(t) for t in WORKSPACE.free}
+
+    first = epoch()
+    assert first  # the activations and deltas came back
+    for _ in range(3):
+        assert epoch() == first  # the very same buffers each epoch, none new
+    assert len(WORKSPACE.free) <= WORKSPACE.keep
