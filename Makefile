@@ -19,7 +19,7 @@ $(BIN)/activate: requirements.lock pyproject.toml
 venv: $(BIN)/activate
 
 demo: venv
-	$(BIN)/parknss demo --out runs/demo
+	$(BIN)/parknss demo --out runs/demo --overwrite
 
 test: venv
 	$(BIN)/ruff check src tests benchmarks
