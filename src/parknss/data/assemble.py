@@ -32,7 +32,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -237,14 +237,17 @@ def _check_finite(s: Series, values: np.ndarray, source: str) -> None:
     )
 
 
-def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None) -> Series:
-    """The samples ``keep`` of a series; error locations still point into the source."""
+def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None, **changes) -> Series:
+    """The samples ``keep`` of a series (``values``: already taken from them), with other
+    fields changed; error locations still point into the source."""
     idx = np.flatnonzero(keep)
     locate = s.locate
-    sub_locate = None if locate is None else (lambda i: locate(int(idx[i])))
-    vals = s.values[keep] if values is None else values
-    return Series(
-        s.channel, s.key, s.label, s.t[keep], vals, s.hold, s.unit, sub_locate, s.event
+    return replace(
+        s,
+        t=s.t[keep],
+        values=s.values[keep] if values is None else values,
+        locate=None if locate is None else (lambda i: locate(int(idx[i]))),
+        **changes,
     )
 
 
@@ -252,8 +255,7 @@ def prepare(s: Series, m: ChannelMapping, source: str) -> _Prepared:
     """Steps 1-2 for one series: drop invalid samples, map enumerations, check numbers."""
     spec = spec_of(m, s.channel)
     bad = _invalid_mask(s, spec)
-    sub = _subset(s, ~bad)
-    values = _map_values(sub, spec, source)
+    values = _map_values(_subset(s, ~bad), spec, source)
     if spec.valid_range is not None and s.values.dtype.kind in "OSU":
         lo, hi = spec.valid_range
         out = (values < lo) | (values > hi)
@@ -262,9 +264,8 @@ def prepare(s: Series, m: ChannelMapping, source: str) -> _Prepared:
     hold = s.hold if spec.interpolation == "auto" else spec.interpolation == "hold"
     if s.channel in CHANNEL_BY_NAME and CHANNEL_BY_NAME[s.channel].integer:
         hold = True  # gear is never interpolated (the mapping check refuses linear)
-    sub = _subset(s, ~bad, values)
-    sub = Series(sub.channel, sub.key, sub.label, sub.t, sub.values, hold, sub.unit,
-                 sub.locate, sub.event)
+    event = spec.event if spec.event is not None else s.event
+    sub = _subset(s, ~bad, values, hold=hold, event=event)
     _check_finite(sub, values, source)
     if not len(values):
         raise DataError(
@@ -273,7 +274,6 @@ def prepare(s: Series, m: ChannelMapping, source: str) -> _Prepared:
         )
     crop_marks = s.t[bad] if spec.on_invalid == "crop" else np.empty(0)
     gap = spec.max_gap_s if spec.max_gap_s is not None else m.resample.max_gap_s
-    event = spec.event if spec.event is not None else s.event
     return _Prepared(sub, int(bad.sum()), crop_marks, gap, event)
 
 
