@@ -190,32 +190,28 @@ def _can_messages(frames: FrameTable):
         )
 
 
-def write_blf(path: str | Path, frames: FrameTable) -> Path:
-    """A Vector .blf (python-can's BLFWriter; bus b is BLF channel b + 1)."""
+def _write_python_can(path: str | Path, frames: FrameTable, writer_name: str) -> Path:
+    """Frames through one of python-can's file writers (``BLFWriter``, ``ASCWriter``)."""
     import can
 
     p = Path(path)
-    writer = can.BLFWriter(str(p))
+    writer = getattr(can, writer_name)(str(p))
     try:
         for msg in _can_messages(frames):
             writer.on_message_received(msg)
     finally:
         writer.stop()
     return p
+
+
+def write_blf(path: str | Path, frames: FrameTable) -> Path:
+    """A Vector .blf (python-can's BLFWriter; bus b is BLF channel b + 1)."""
+    return _write_python_can(path, frames, "BLFWriter")
 
 
 def write_asc(path: str | Path, frames: FrameTable) -> Path:
     """A Vector .asc (python-can's ASCWriter; bus b is channel b + 1)."""
-    import can
-
-    p = Path(path)
-    writer = can.ASCWriter(str(p))
-    try:
-        for msg in _can_messages(frames):
-            writer.on_message_received(msg)
-    finally:
-        writer.stop()
-    return p
+    return _write_python_can(path, frames, "ASCWriter")
 
 
 def _hex_rows(data: np.ndarray, dlc: np.ndarray, sep: str) -> list[str]:
