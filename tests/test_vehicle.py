@@ -88,3 +88,29 @@ def test_arc_step_is_the_analytic_circle_and_line():
     # a tiny turn is the line to first order (no 0/0)
     x, y, h = arc_step(0.0, 0.0, 0.0, 1.0, 1e-14)
     assert (x, h) == pytest.approx((1.0, 1e-14)) and y == pytest.approx(5e-15, abs=1e-20)
+
+
+def test_vehicle_yaml_gives_the_geometry_and_refuses_bad_files(tmp_path):
+    """Issue 17: one car end to end starts with reading it (--vehicle FILE.yaml)."""
+    import pytest
+
+    from parknss.config import CONFIG_DIR
+    from parknss.errors import ConfigError
+    from parknss.vehicle import load_vehicle_geometry, same_geometry
+
+    tpcap = load_vehicle_geometry(CONFIG_DIR / "tpcap_vehicle.yaml")
+    assert tpcap.wheelbase == 2.8 and tpcap.width == 1.942 and tpcap.rear_overhang == 0.929
+    assert tpcap.front_overhang == pytest.approx(0.96)
+    assert math.radians(tpcap.steer_lock_deg / tpcap.steer_ratio) == pytest.approx(0.75, abs=1e-4)
+    assert tpcap.min_turning_radius() == pytest.approx(2.8 / math.tan(0.75), rel=1e-3)
+    alt = load_vehicle_geometry(CONFIG_DIR / "reference_vehicle_alt.yaml")  # a full vehicle file
+    assert alt.wheelbase == 2.8 and same_geometry(alt, VehicleGeometry())
+    bad = tmp_path / "car.yaml"
+    bad.write_text("geometry:\n  wheelbase: 2.8\n  wheel_base: 2.7\n")
+    with pytest.raises(ConfigError, match="unknown geometry key"):
+        load_vehicle_geometry(bad)
+    bad.write_text("geometry:\n  wheelbase: -1\n")
+    with pytest.raises(ConfigError, match="positive"):
+        load_vehicle_geometry(bad)
+    with pytest.raises(ConfigError, match="not found"):
+        load_vehicle_geometry(tmp_path / "none.yaml")

@@ -8,9 +8,12 @@ near centre, 12.1 toward the lock). Functions accept floats, NumPy arrays or tor
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
 
 import numpy as np
+
+from parknss.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,52 @@ class VehicleGeometry:
     def from_dict(cls, d: dict) -> VehicleGeometry:
         known = {k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__}
         return cls(**known)
+
+
+def load_vehicle_geometry(path: str | Path) -> VehicleGeometry:
+    """The geometry of a vehicle YAML: its ``geometry:`` section (the reference vehicle
+    files' layout; the rest of such a file is ignored) or, without one, the top level.
+
+    Keys are the fields of :class:`VehicleGeometry` (m, deg of steering-wheel angle);
+    omitted ones keep the defaults. One-line ConfigError for a missing file, an unknown
+    key, or a value that is not a positive finite number.
+    """
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: vehicle file not found")
+    try:
+        doc = yaml.safe_load(p.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
+    section = doc.get("geometry", doc) if isinstance(doc, dict) else None
+    if not isinstance(section, dict):
+        raise ConfigError(f"{p}: expected a mapping with a 'geometry' section")
+    known = {f.name for f in fields(VehicleGeometry)}
+    unknown = sorted(set(section) - known)
+    if unknown:
+        raise ConfigError(f"{p}: unknown geometry key(s) {unknown}; known: {sorted(known)}")
+    values = {}
+    for k, v in section.items():
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
+            raise ConfigError(f"{p}: geometry.{k} must be a positive number, got {v!r}")
+        values[k] = float(v)
+    geom = VehicleGeometry(**values)
+    if geom.front_overhang < 0:
+        raise ConfigError(f"{p}: length must cover wheelbase + rear_overhang")
+    if geom.steer_ratio_center < geom.steer_ratio_lock:
+        raise ConfigError(f"{p}: steer_ratio_center must be >= steer_ratio_lock")
+    return geom
+
+
+def same_geometry(a: VehicleGeometry, b: VehicleGeometry, rtol: float = 1e-6) -> list[str]:
+    """The fields in which two geometries differ (relative tolerance ``rtol``); [] if none."""
+    return [
+        f.name
+        for f in fields(VehicleGeometry)
+        if not math.isclose(getattr(a, f.name), getattr(b, f.name), rel_tol=rtol)
+    ]
 
 
 def _tan(x):

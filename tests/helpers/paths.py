@@ -11,3 +11,4 @@ TESTS = ROOT / "tests"
 REALDATA = ROOT.parent / "shared" / "realdata"
 KONA = REALDATA / "kona_ev_2019"
 CANEDGE = REALDATA / "css_canedge_gnss_imu"
+TPCAP = ROOT.parent / "shared" / "planning" / "tpcap"  # the TPCAP cases, read in place

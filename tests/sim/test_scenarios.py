@@ -154,7 +154,7 @@ def test_json_round_trip(tmp_path):
         (lambda d: d.pop("goal"), "missing key 'goal'"),
         (lambda d: d.update(start=[0, 0]), "start"),
         (lambda d: d.update(bounds=[5, 0, 1, 1]), "xmin < xmax"),
-        (lambda d: d["obstacles"][0].update(vertices=[[0, 0], [2, 0], [1, 0.5], [2, 2]]), "convex"),
+        (lambda d: d["obstacles"][0].update(vertices=[[0, 0], [2, 2], [2, 0], [0, 2]]), "simple"),
         (lambda d: d["obstacles"].append({"kind": "car"}), "vertices"),
         (lambda d: d["meta"].update(colour="red"), "unknown meta"),
         (lambda d: d.update(goal=[0, "a", 0]), "goal"),

@@ -151,13 +151,13 @@ def _scene(**changes) -> dict:
 
 
 BAD_SCENES = [
-    ("two vertices", _scene(obstacles=[{"kind": "car", "vertices": [[0, 0], [1, 1]]}]), "3"),
+    ("one vertex", _scene(obstacles=[{"kind": "car", "vertices": [[0, 0]]}]), "2"),
     (
-        "not convex",
-        _scene(obstacles=[{"kind": "car", "vertices": [[0, 0], [4, 0], [1, 1], [0, 4]]}]),
-        "not convex",
+        "self-intersecting",
+        _scene(obstacles=[{"kind": "car", "vertices": [[0, 0], [4, 4], [4, 0], [0, 4]]}]),
+        "not simple",
     ),
-    ("no area", _scene(obstacles=[{"vertices": [[0, 0], [1, 1], [2, 2]]}]), "no area"),
+    ("too many", _scene(obstacles=[{"vertices": [[0, 0], [1, 0], [0, 1]]}] * 2001), "max_obst"),
     ("vertex text", _scene(obstacles=[{"vertices": [["a", 0], [1, 0], [0, 1]]}]), "numbers"),
     ("missing goal", {k: v for k, v in _scene().items() if k != "goal"}, "goal"),
     ("bounds reversed", _scene(bounds=[5, 5, -5, -5]), "xmin < xmax"),
@@ -333,3 +333,33 @@ def test_the_web_command_serves_the_page_and_the_api():
         proc.terminate()
         proc.wait(timeout=30)
     assert f"http://127.0.0.1:{port}/" in proc.stderr.read()
+
+
+def test_benchmark_files_are_imported_as_scenes_and_plan(client):
+    """Issue 17: the page opens TPCAP cases and CommonRoad scenarios via /api/import."""
+    from helpers.paths import TESTS
+
+    xml = (TESTS / "sim" / "fixtures" / "commonroad_parking.xml").read_text()
+    r = client.post("/api/import", json={"filename": "parking.xml", "text": xml})
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    assert doc["scene"]["format"] == "parknss.scene" and len(doc["scene"]["obstacles"]) == 3
+    assert doc["scene"]["meta"]["source"] == "parking.xml"
+    case = "0,0,0,10,0,0,1,6,3,3,7,3,7,4,4,4,4,6,3,6"  # one L-shaped obstacle
+    r = client.post("/api/import", json={"filename": "Case99.csv", "text": case})
+    assert r.status_code == 200 and "split into 2 convex parts" in r.json()["notes"][0]
+    bad = client.post("/api/import", json={"filename": "Case99.csv", "text": "1,2"})
+    assert bad.status_code == 422 and "Case99.csv" in bad.json()["error"]
+    other = client.post("/api/import", json={"filename": "scene.json", "text": "{}"})
+    assert other.status_code == 422
+
+
+def test_a_huge_scene_is_refused_at_once(client):
+    """Issue 17: 100,000 obstacles posted to the API answered only after 99 s."""
+    import time
+
+    box = [[0, 0], [0.1, 0], [0.1, 0.1], [0, 0.1]]
+    t0 = time.perf_counter()
+    r = client.post("/api/plan", json={"scene": _scene(obstacles=[{"vertices": box}] * 100_000)})
+    assert r.status_code == 422 and "max_obstacles" in r.json()["error"]
+    assert time.perf_counter() - t0 < 30.0  # JSON parsing only; was 99 s of planning

@@ -1,15 +1,17 @@
 """``parknss plan``: plan one parking scene or a whole scenario grid.
 
-``parknss plan --scene FILE|CELL`` plans one scene (a scene JSON file, a grid cell 0-35,
-or ``robust:N`` for robustness cell 0-251) exactly as ``parknss simulate`` will drive it
-(:func:`parknss.sim.planner.plan_scene`: the closed-loop config's steering reserve and
-margin), draws it to a PNG and prints a summary (or one JSON object). ``--no-reserve``
-plans as the planner alone instead (full steering lock, planning.yaml's margin): a plan
-that no other command drives. ``parknss plan --grid 36`` (``12``: the tuning core,
-``252``: the robustness grid) plans every cell through the one executor and prints a
-table (or one JSON list). The figure goes to ``--out`` (default ``runs/plan/<scene>``), a
-run folder refused if it holds anything but the same plan unless ``--overwrite``
-(:mod:`parknss.experiments.scenes`).
+``parknss plan --scene FILE|CELL`` plans one scene (a scene JSON file, a TPCAP case CSV,
+a CommonRoad XML scenario, a grid cell 0-35, or ``robust:N`` for robustness cell 0-251;
+an imported scene is also written as scene JSON beside the figure) for the car of
+``--vehicle`` (default: the car the shipped chain was identified on) exactly as
+``parknss simulate`` will drive it (:func:`parknss.sim.planner.plan_scene`: the
+closed-loop config's steering reserve and margin), draws it to a PNG and prints a
+summary (or one JSON object). ``--no-reserve`` plans as the planner alone instead (full
+steering lock, planning.yaml's margin): a plan that no other command drives.
+``parknss plan --grid 36`` (``12``: the tuning core, ``252``: the robustness grid) plans
+every cell through the one executor and prints a table (or one JSON list). The figure
+goes to ``--out`` (default ``runs/plan/<scene>``), a run folder refused if it holds
+anything but the same plan unless ``--overwrite`` (:mod:`parknss.experiments.scenes`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ def register(app: typer.Typer) -> None:
     @app.command("plan")
     def plan(
         scene: str | None = typer.Option(
-            None, "--scene", help="Scene JSON file, grid cell 0-35, or robust:N (0-251)."
+            None, "--scene", help="Scene JSON, TPCAP .csv, CommonRoad .xml, cell 0-35, robust:N."
         ),
         grid: str | None = typer.Option(
             None, "--grid", help="Plan a whole grid: 36 (default grid), 12 (core), 252."
@@ -50,6 +52,9 @@ def register(app: typer.Typer) -> None:
         scenarios_config: Path | None = typer.Option(
             None, "--scenarios-config", help="Scenarios YAML."
         ),
+        vehicle: Path | None = typer.Option(
+            None, "--vehicle", help="Vehicle YAML (default: the chain's car)."
+        ),
         no_refine: bool = typer.Option(False, "--no-refine", help="Coarse path only."),
         no_reserve: bool = typer.Option(
             False, "--no-reserve", help="Full lock, planning.yaml margin: not what is driven."
@@ -61,7 +66,7 @@ def register(app: typer.Typer) -> None:
 
         if (scene is None) == (grid is None):
             raise PlanningError("give exactly one of --scene FILE|CELL or --grid 36|12|252")
-        files = SimConfigFiles(closed_loop_config, None, config, scenarios_config)
+        files = SimConfigFiles(closed_loop_config, None, config, scenarios_config, vehicle)
         overrides = NO_RESERVE if no_reserve else None
         settings = {"refine": not no_refine, "closed_loop_overrides": overrides,
                     "out": out, "overwrite": overwrite}

@@ -19,6 +19,9 @@ CONFIG = typer.Option(None, "--config", help="Closed-loop YAML (configs/closed_l
 INTERFACE = typer.Option(None, "--interface", help="Interface gains YAML.")
 PLANNING = typer.Option(None, "--planning-config", help="Planning YAML.")
 SCENARIOS = typer.Option(None, "--scenarios-config", help="Scenarios YAML.")
+VEHICLE = typer.Option(
+    None, "--vehicle", help="Vehicle YAML (default: the chain's car): configs/tpcap_vehicle.yaml."
+)
 EXECUTOR = typer.Option("local", "--executor", help="local (loky pool) or ray.")
 ADDRESS = typer.Option(None, "--address", help="Ray cluster address (--executor ray).")
 WORKERS = typer.Option(1, "--workers", help="Parallel workers.")
@@ -37,7 +40,9 @@ def _files(*paths: Path | None) -> SimConfigFiles:
 def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate(
-        scene: str = typer.Option(..., "--scene", help="Scene JSON file, cell 0-35, robust:N."),
+        scene: str = typer.Option(
+            ..., "--scene", help="Scene JSON, TPCAP .csv, CommonRoad .xml, cell 0-35, robust:N."
+        ),
         plant: str = typer.Option("kinematic", "--plant", help="kinematic, chain or reference."),
         compare: str | None = typer.Option(
             None, "--compare", help="Plants on the same plan, e.g. kinematic,reference."
@@ -52,6 +57,7 @@ def register(app: typer.Typer) -> None:
         interface: Path | None = INTERFACE,
         planning_config: Path | None = PLANNING,
         scenarios_config: Path | None = SCENARIOS,
+        vehicle: Path | None = VEHICLE,
     ) -> None:
         """Execute one planned scene in closed loop; draw Fig. 8 and Fig. 9."""
         from parknss.experiments.scenes import simulate_one
@@ -59,7 +65,7 @@ def register(app: typer.Typer) -> None:
         from parknss.sim.session import summary_text
 
         plants = parse_plants(plant if compare is None else f"{plant},{compare}")
-        files = _files(config, interface, planning_config, scenarios_config)
+        files = _files(config, interface, planning_config, scenarios_config, vehicle)
         doc = simulate_one(scene, plants, files, out=out, series=series, overwrite=overwrite)
         typer.echo(json.dumps(doc, indent=2) if as_json else summary_text(doc))
 
@@ -78,12 +84,13 @@ def register(app: typer.Typer) -> None:
         interface: Path | None = INTERFACE,
         planning_config: Path | None = PLANNING,
         scenarios_config: Path | None = SCENARIOS,
+        vehicle: Path | None = VEHICLE,
     ) -> None:
         """Run a scenario grid in closed loop under several plants; print Table V."""
         from parknss.sim.grid import run_grid_report, table_v
         from parknss.sim.plants import parse_plants
 
-        files = _files(config, interface, planning_config, scenarios_config)
+        files = _files(config, interface, planning_config, scenarios_config, vehicle)
         doc = run_grid_report(
             grid, parse_plants(plants), out, cells=cells, files=files,
             executor=executor, workers=workers, address=address, overwrite=overwrite,
@@ -110,11 +117,12 @@ def register(app: typer.Typer) -> None:
         interface: Path | None = INTERFACE,
         planning_config: Path | None = PLANNING,
         scenarios_config: Path | None = SCENARIOS,
+        vehicle: Path | None = VEHICLE,
     ) -> None:
         """Tune the interface gains on the 12-cell core; write interface_tuned.yaml."""
         from parknss.sim.tuning import tune_gains
 
-        files = _files(config, interface, planning_config, scenarios_config)
+        files = _files(config, interface, planning_config, scenarios_config, vehicle)
         doc = tune_gains(
             plant, out, rounds=rounds, files=files, executor=executor, workers=workers,
             address=address, log=lambda m: typer.echo(f"[sim] {m}", err=True),

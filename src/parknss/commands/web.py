@@ -27,6 +27,9 @@ def register(app: typer.Typer) -> None:
             True, "--open/--no-open", help="Open the page in the default browser."
         ),
         config: Path | None = typer.Option(None, "--config", help="Web YAML (configs/web.yaml)."),
+        vehicle: Path | None = typer.Option(
+            None, "--vehicle", help="Vehicle YAML (web.yaml: the chain's car)."
+        ),
     ) -> None:
         """Serve the interactive parking simulator (plan, run, play back) in the browser."""
         import uvicorn
@@ -34,7 +37,8 @@ def register(app: typer.Typer) -> None:
         from parknss.web.app import create_app
         from parknss.web.config import load_web_config
 
-        overrides = {k: v for k, v in (("host", host), ("port", port)) if v is not None}
+        given = (("host", host), ("port", port), ("vehicle", vehicle and str(vehicle)))
+        overrides = {k: v for k, v in given if v is not None}
         cfg = load_web_config(config, **overrides)
         url = f"http://{cfg.host}:{cfg.port}/"
         server = uvicorn.Server(

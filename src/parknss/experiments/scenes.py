@@ -20,6 +20,7 @@ from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.grid import config_paths
 from parknss.sim.planner import plan_grid, plan_named_scene
+from parknss.sim.scene_formats import load_scene
 from parknss.sim.session import check_plants, simulate_scene
 
 
@@ -44,17 +45,23 @@ def plan_one(
     (:func:`parknss.sim.planner.plan_named_scene`), draw ``plan_<scene>.png`` and, with
     ``out``, write ``plan_<scene>.json``; the plan summary with the figure's path."""
     files = files or SimConfigFiles()
-    scene = sc.resolve_scene(spec, files.scenarios_config())
+    scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
     folder = out or Path("runs") / "plan" / scene.meta.name
     identity = {"scene": _scene_arg(spec), "refine": refine,
                 "closed_loop_overrides": closed_loop_overrides, **config_paths(files)}
     with run_folder(folder, command="parknss plan", args=identity, overwrite=overwrite) as run:
         scene, plan = plan_named_scene(spec, files, refine=refine,
                                        closed_loop_overrides=closed_loop_overrides)
+        geom = files.vehicle_geometry()
         summary = plan.to_json(scene)
+        if scene.notes:
+            summary["scene_notes"] = list(scene.notes)
         png = folder / f"plan_{scene.meta.name}.png"
         summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse,
-                                          refined=plan.refinement))
+                                          refined=plan.refinement, geom=geom))
+        if Path(str(spec)).suffix.lower() in (".csv", ".xml"):  # an imported scene
+            summary["scene_json"] = str(run.write_json(f"scene_{scene.meta.name}.json",
+                                                       scene.to_json()))
         if out is not None:
             run.write_json(f"plan_{scene.meta.name}.json", summary)
     return summary
@@ -102,8 +109,8 @@ def simulate_one(
     (:func:`parknss.sim.session.simulate_scene`); draw Figs. 8/9 (and, with ``series``,
     write the time-series CSVs) and ``simulate_<scene>.json``; the JSON summary."""
     files = files or SimConfigFiles()
-    check_plants(plants, files.closed_loop_config())  # fail fast, before the claim
-    scene = sc.resolve_scene(spec, files.scenarios_config())
+    check_plants(plants, files.closed_loop_config(), files.vehicle_geometry())  # fail fast
+    scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
     folder = out or Path("runs") / "simulate" / scene.meta.name
     identity = {"scene": _scene_arg(spec), "plants": plants, "series": series,
                 **config_paths(files)}

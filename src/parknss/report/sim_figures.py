@@ -116,6 +116,8 @@ def draw_scene_run(run: SceneRun, out: str | Path) -> dict[str, str]:
     out = Path(out)
     runs = {o.plant: o.series for o in run.outcomes}
     name, tag = run.scene.meta.name, "_vs_".join(runs)
-    fig8 = draw_driven(run.scene, run.plan.trajectory, runs, out / f"fig8_{name}_{tag}.png")
+    fig8 = draw_driven(
+        run.scene, run.plan.trajectory, runs, out / f"fig8_{name}_{tag}.png", run.geom
+    )
     fig9 = draw_states(runs, out / f"fig9_{name}_{tag}.png", title=name)
     return {"fig8": str(fig8), "fig9": str(fig9)}

@@ -38,6 +38,7 @@ from parknss.sim.planning.hybrid_astar import PlanningConfig, load_planning_conf
 from parknss.sim.plants import PoseIntegrator, SimPlant
 from parknss.sim.scenarios import ScenariosConfig, load_scenarios_config
 from parknss.sim.trajectory import Trajectory
+from parknss.sim.vehicles import resolve_vehicle
 from parknss.vehicle import VehicleGeometry
 
 REASONS = ("completed", "collision", "livelock", "timeout", "not plannable")
@@ -104,9 +105,10 @@ class SimConfigFiles:
     interface: str | None = None
     planning: str | None = None
     scenarios: str | None = None
+    vehicle: str | None = None  # vehicle YAML (None: the chain's car, else the default car)
 
     def __post_init__(self) -> None:
-        for name in ("closed_loop", "interface", "planning", "scenarios"):
+        for name in ("closed_loop", "interface", "planning", "scenarios", "vehicle"):
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, str(value))
@@ -125,6 +127,10 @@ class SimConfigFiles:
 
     def scenarios_config(self) -> ScenariosConfig:
         return load_scenarios_config(self.scenarios)
+
+    def vehicle_geometry(self) -> VehicleGeometry:
+        """The car of the run (:func:`parknss.sim.vehicles.resolve_vehicle`)."""
+        return resolve_vehicle(self.vehicle, self.closed_loop_config().chain_path)
 
 
 @dataclass

@@ -42,7 +42,10 @@ def convex_polygon(vertices, name: str = "polygon") -> np.ndarray:
     """Validate a convex polygon and return it as a (M, 2) counter-clockwise array.
 
     Raises PlanningError naming ``name`` if it has fewer than 3 vertices, non-finite
-    values, no area, or is not convex. Either input orientation is accepted.
+    values, no area, or is not convex. Either input orientation is accepted. Area and
+    convexity are judged in a local frame (vertices minus the first), so a polygon far
+    from the origin (TPCAP cases near 4e9 m) is judged like the same one at the origin.
+    Scenes as drawn (non-convex, walls) go through :mod:`parknss.sim.obstacles`.
     """
     try:
         v = np.asarray(vertices, dtype=float)
@@ -52,9 +55,10 @@ def convex_polygon(vertices, name: str = "polygon") -> np.ndarray:
         raise PlanningError(f"{name}: need at least 3 [x, y] vertices, got shape {v.shape}")
     if not np.all(np.isfinite(v)):
         raise PlanningError(f"{name}: vertices must be finite")
-    e = np.roll(v, -1, axis=0) - v
+    loc = v - v[0]  # a local frame: area and convexity do not depend on where the map lies
+    e = np.roll(loc, -1, axis=0) - loc
     cross = e[:, 0] * np.roll(e[:, 1], -1) - e[:, 1] * np.roll(e[:, 0], -1)
-    area2 = float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - v[:, 1] * np.roll(v[:, 0], -1)))
+    area2 = float(np.sum(loc[:, 0] * np.roll(loc[:, 1], -1) - loc[:, 1] * np.roll(loc[:, 0], -1)))
     if abs(area2) < 1e-9:
         raise PlanningError(f"{name}: polygon has no area")
     if area2 < 0:

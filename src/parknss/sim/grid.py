@@ -35,13 +35,18 @@ def cell_job(
     interface_overrides: dict | None = None,
     planning_config: str | None = None,
     scenarios_config: str | None = None,
+    vehicle: str | None = None,
 ) -> list[dict]:
-    """Executor job: one cell of grid "36" or "252" under each plant; JSON rows."""
-    files = SimConfigFiles(closed_loop_config, interface_config, planning_config, scenarios_config)
-    scene = sc.cell_scene(grid, index, files.scenarios_config())
+    """Executor job: one cell of grid "36" or "252" under each plant; JSON rows. The
+    grid is built for the run's car (``vehicle`` YAML, else the chain's car)."""
+    files = SimConfigFiles(
+        closed_loop_config, interface_config, planning_config, scenarios_config, vehicle
+    )
+    geom = files.vehicle_geometry()
+    scene = sc.cell_scene(grid, index, files.scenarios_config(), geom)
     cfg = files.closed_loop_config()
     icfg = override(files.interface_config(), interface_overrides, source="interface overrides")
-    plan, outcomes = run_cell(scene, plants, cfg, icfg, planning_config)
+    plan, outcomes = run_cell(scene, plants, cfg, icfg, planning_config, geom)
     rows = []
     for o in outcomes:
         row = o.to_json()
@@ -86,6 +91,7 @@ def run_grid(
         "interface_overrides": interface_overrides,
         "planning_config": files.planning,
         "scenarios_config": files.scenarios,
+        "vehicle": files.vehicle,
     }
     results = sc.run_cells(
         "parknss.sim.grid:cell_job",
@@ -251,7 +257,7 @@ def run_grid_report(
     path)."""
     files = files or SimConfigFiles()
     cfg = files.closed_loop_config()
-    check_plants(plants, cfg)  # fail fast, before any cell runs
+    check_plants(plants, cfg, files.vehicle_geometry())  # fail fast, before any cell runs
     idx = sc.grid_cells(grid, files.scenarios_config(), cells)
     identity = {"grid": grid, "plants": plants, "cells": idx, **config_paths(files)}
     with run_folder(out, command="parknss grid", args=identity, overwrite=overwrite) as run:

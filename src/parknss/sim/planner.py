@@ -31,6 +31,7 @@ from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import ClosedLoopConfig, SimConfigFiles, load_closed_loop_config
 from parknss.sim.planning.hybrid_astar import HybridAStar, PlanningConfig, load_planning_config
 from parknss.sim.planning.refine import refine as refine_path
+from parknss.sim.scene_formats import load_scene
 from parknss.sim.trajectory import Trajectory
 from parknss.vehicle import VehicleGeometry
 
@@ -60,6 +61,7 @@ class Plan:
     expansions: int = 0
     steer_reserve: float = 0.0
     margin_m: float | None = None
+    vehicle: dict | None = None  # the car planned for (VehicleGeometry.to_dict, full lock)
 
     def to_json(self, scene: sc.Scene) -> dict:
         """The plan summary ``parknss plan --json`` prints (and ``simulate`` reports as
@@ -84,6 +86,7 @@ class Plan:
             "expansions": self.expansions,
             "steer_reserve": self.steer_reserve,
             "margin_m": self.margin_m,
+            "vehicle": self.vehicle,
             "trajectory": traj.digest() if traj is not None else None,
         }
 
@@ -121,13 +124,18 @@ def plan_scene(
         refine: False keeps the coarse Hybrid A* path.
     """
     loop = loop if loop is not None else load_closed_loop_config()
-    geom = planning_geometry(geom or VehicleGeometry(), loop.steer_reserve)
+    car = geom or VehicleGeometry()
+    geom = planning_geometry(car, loop.steer_reserve)
     cfg = planning if isinstance(planning, PlanningConfig) else load_planning_config(planning)
     if loop.plan_margin_m is not None:
         cfg = override(cfg, {"safety_margin_m": loop.plan_margin_m}, source="plan_margin_m")
     t0 = time.perf_counter()
     res = HybridAStar(cfg, geom).plan(scene)
-    settings = {"steer_reserve": loop.steer_reserve, "margin_m": cfg.safety_margin_m}
+    settings = {
+        "steer_reserve": loop.steer_reserve,
+        "margin_m": cfg.safety_margin_m,
+        "vehicle": car.to_dict(),
+    }
     if not res.found:
         return Plan(
             None,
@@ -145,6 +153,9 @@ def plan_scene(
             rr = refine_path(scene, res.trajectory, geom, cfg)
         except ParknssError as exc:
             rr, refine_reason = None, f"refinement error: {exc}"
+        except Exception as exc:  # any other failure of the refinement: the coarse path
+            first = (str(exc).splitlines() or [""])[0][:80]
+            rr, refine_reason = None, f"refinement error ({type(exc).__name__}: {first})"
         refine_s = time.perf_counter() - t1
         if rr is not None:
             refinement, refine_reason = rr.trajectory, str(rr.reason)
@@ -184,9 +195,10 @@ def plan_named_scene(
     """(scene, plan) of a scene JSON file, grid cell 0-35 or ``robust:N``, planned with
     the configs of ``files`` (``closed_loop_overrides``: e.g. :data:`NO_RESERVE`)."""
     files = files or SimConfigFiles()
-    scene = sc.resolve_scene(spec, files.scenarios_config())
+    geom = files.vehicle_geometry()
+    scene = load_scene(spec, files.scenarios_config(), geom)
     loop = override(files.closed_loop_config(), closed_loop_overrides, source="plan settings")
-    return scene, plan_scene(scene, loop, files.planning_config(), refine=refine)
+    return scene, plan_scene(scene, loop, files.planning_config(), geom, refine=refine)
 
 
 def plan_cell_job(
@@ -197,12 +209,14 @@ def plan_cell_job(
     scenarios_config: str | None = None,
     refine: bool = True,
     closed_loop_overrides: dict | None = None,
+    vehicle: str | None = None,
 ) -> dict:
     """Executor job: plan cell ``index`` of grid "36" or "252"; its :meth:`Plan.to_json`."""
-    files = SimConfigFiles(closed_loop_config, None, planning_config, scenarios_config)
-    scene = sc.cell_scene(grid, index, files.scenarios_config())
+    files = SimConfigFiles(closed_loop_config, None, planning_config, scenarios_config, vehicle)
+    geom = files.vehicle_geometry()
+    scene = sc.cell_scene(grid, index, files.scenarios_config(), geom)
     loop = override(files.closed_loop_config(), closed_loop_overrides, source="plan settings")
-    return plan_scene(scene, loop, files.planning_config(), refine=refine).to_json(scene)
+    return plan_scene(scene, loop, files.planning_config(), geom, refine=refine).to_json(scene)
 
 
 def plan_grid(
@@ -229,6 +243,7 @@ def plan_grid(
         "scenarios_config": files.scenarios,
         "refine": refine,
         "closed_loop_overrides": closed_loop_overrides,
+        "vehicle": files.vehicle,
     }
     return sc.run_cells(
         "parknss.sim.planner:plan_cell_job",

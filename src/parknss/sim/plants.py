@@ -40,6 +40,7 @@ from parknss.errors import CheckpointError, ConfigError, ParknssError
 from parknss.plant import Commands, Plant, PlantOutput
 from parknss.signals import DT
 from parknss.sim.control.interface import CommandInterface, InterfaceConfig, Request
+from parknss.sim.vehicles import check_chain_vehicle
 from parknss.vehicle import VehicleGeometry, arc_step, yaw_rate_ref
 
 PLANT_KINDS: tuple[str, ...] = ("kinematic", "chain", "reference")
@@ -178,7 +179,7 @@ class KinematicInterface(CommandInterface):
     def __init__(
         self, plant: KinematicPlant, cfg: InterfaceConfig | None = None, dt: float = DT
     ) -> None:
-        super().__init__(cfg, dt)
+        super().__init__(cfg, dt, plant.geom.steer_lock_deg)
         self.plant = plant
 
     def step(self, req: Request, y: PlantOutput) -> Commands:
@@ -196,6 +197,7 @@ class _TruthPlant:
     """
 
     name = "plant"
+    geom: VehicleGeometry | None = None  # the car, where the plant knows it
 
     def __init__(self, plant: Plant) -> None:
         self.plant = plant
@@ -232,7 +234,8 @@ class _TruthPlant:
     def command_interface(
         self, cfg: InterfaceConfig | None = None, dt: float = DT
     ) -> CommandInterface:
-        return CommandInterface(cfg, dt)
+        lock = None if self.geom is None else self.geom.steer_lock_deg
+        return CommandInterface(cfg, dt, lock)
 
 
 class ReferencePlant(_TruthPlant):
@@ -268,7 +271,7 @@ class ChainPlant(_TruthPlant):
 
     name = "chain"
 
-    def __init__(self, path: str | Path | None = None) -> None:
+    def __init__(self, path: str | Path | None = None, geom: VehicleGeometry | None = None):
         from parknss.chain import load_chain
 
         p = Path(path) if path else SHIPPED_CHAIN
@@ -280,6 +283,10 @@ class ChainPlant(_TruthPlant):
             raise CheckpointError(f"{p}: cannot load the chain ({exc})") from exc
         if not isinstance(chain, Plant):
             raise CheckpointError(f"{p}: loaded chain does not implement reset/step (Plant)")
+        nss = getattr(getattr(chain, "chain", None), "nss", None)
+        self.geom = getattr(nss, "geometry", None)  # the car the chain was identified on
+        if geom is not None:
+            check_chain_vehicle(self.geom, geom, f"chain {p}")
         super().__init__(chain)
 
 
@@ -295,9 +302,12 @@ def make_plant(
     if kind == "kinematic":
         return KinematicPlant(geom)
     if kind == "reference":
-        return ReferencePlant(vehicle_yaml, seed)
+        plant = ReferencePlant(vehicle_yaml, seed)
+        if geom is not None:
+            check_chain_vehicle(plant.geom, geom, "the reference vehicle")
+        return plant
     if kind == "chain":
-        return ChainPlant(chain_path)
+        return ChainPlant(chain_path, geom)
     raise ConfigError(f"unknown plant {kind!r}; one of {', '.join(PLANT_KINDS)}")
 
 

@@ -40,6 +40,12 @@ from pydantic import Field
 from parknss.config import StrictModel, load_config
 from parknss.errors import ConfigError, PlanningError
 from parknss.sim.geometry import convex_polygon, rectangle
+from parknss.sim.obstacles import (
+    ObstacleInputConfig,
+    SceneImportConfig,
+    check_counts,
+    drawn_obstacle,
+)
 from parknss.vehicle import VehicleGeometry
 
 BAYS = ("parallel", "perpendicular", "angled")
@@ -117,6 +123,8 @@ class ScenariosConfig(StrictModel):
     barrier_thickness_m: float = Field(0.2, gt=0)
     core_tier: int = Field(1, ge=0, le=2, description="tier of the 12-cell tuning core")
     robustness: RobustnessConfig = RobustnessConfig()
+    obstacles: ObstacleInputConfig = ObstacleInputConfig()
+    imports: SceneImportConfig = SceneImportConfig()
 
 
 def load_scenarios_config(path: str | Path | None = None) -> ScenariosConfig:
@@ -130,10 +138,17 @@ def load_scenarios_config(path: str | Path | None = None) -> ScenariosConfig:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """A convex obstacle: kind ('car', 'curb', 'barrier', ... any label) and (M, 2) CCW m."""
+    """An obstacle: kind ('car', 'curb', 'wall', ... any label), its outline as drawn
+    ((M, 2) CCW, m; convex or not) and its convex parts (:mod:`parknss.sim.obstacles`;
+    empty: the outline is convex and its own part)."""
 
     kind: str
     vertices: np.ndarray
+    parts: tuple[np.ndarray, ...] = ()
+
+    def convex_parts(self) -> tuple[np.ndarray, ...]:
+        """The convex (K, 2) CCW polygons whose union is the outline, m."""
+        return self.parts or (self.vertices,)
 
 
 @dataclass(frozen=True)
@@ -149,6 +164,10 @@ class SceneMeta:
     robust_index: int | None = None
     perturbation: str = "nominal"
     slot_size_m: float | None = None
+    source: str | None = None
+    origin_m: tuple[float, float] | None = None
+    """Where the scene's local frame lies in the source's coordinates (x, y m): imported
+    benchmark scenes are shifted so their numbers stay small (TPCAP lies near 4e9 m)."""
 
 
 @dataclass(frozen=True)
@@ -160,10 +179,14 @@ class Scene:
     start: tuple[float, float, float]
     goal: tuple[float, float, float]
     meta: SceneMeta = field(default_factory=SceneMeta)
+    notes: tuple[str, ...] = field(default=(), compare=False)
+    """What loading normalised (removed vertices, lines made walls): reported, not saved."""
 
     def obstacle_arrays(self) -> list[np.ndarray]:
-        """The obstacle polygons as a list of (M, 2) CCW arrays, m."""
-        return [o.vertices for o in self.obstacles]
+        """The convex parts of every obstacle as a list of (M, 2) CCW arrays, m: what the
+        search, the dense check, the refinement and the collision check use (their union
+        is each obstacle as drawn, so clearances are exact distances to it)."""
+        return [p for o in self.obstacles for p in o.convex_parts()]
 
     def to_json(self) -> dict:
         """A JSON-serialisable dict (the file format of :meth:`load`)."""
@@ -181,12 +204,16 @@ class Scene:
         }
 
     @classmethod
-    def from_json(cls, data, source: str = "scene") -> Scene:
-        """Build a scene from :meth:`to_json` output; PlanningError naming ``source``."""
-        return _scene_from_json(data, source)
+    def from_json(
+        cls, data, source: str = "scene", cfg: ObstacleInputConfig | None = None
+    ) -> Scene:
+        """Build a scene from :meth:`to_json` output; PlanningError naming ``source``.
+        Obstacles may be any simple polygon or a ``"shape": "polyline"`` wall
+        (:mod:`parknss.sim.obstacles`, limits of ``cfg``)."""
+        return _scene_from_json(data, source, cfg)
 
     @classmethod
-    def load(cls, path: str | Path) -> Scene:
+    def load(cls, path: str | Path, cfg: ObstacleInputConfig | None = None) -> Scene:
         """Read a scene JSON file; PlanningError with the file name if it is malformed."""
         p = Path(path)
         if not p.is_file():
@@ -195,7 +222,7 @@ class Scene:
             data = json.loads(p.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise PlanningError(f"{p}: not valid JSON ({exc.__class__.__name__})") from exc
-        return _scene_from_json(data, str(p))
+        return _scene_from_json(data, str(p), cfg)
 
     def save(self, path: str | Path) -> Path:
         """Write the scene as JSON."""
@@ -217,7 +244,25 @@ def _numbers(value, n: int, what: str, source: str) -> tuple[float, ...]:
     return out
 
 
-def _scene_from_json(data, source: str) -> Scene:
+def obstacle_from_drawing(
+    kind: str, vertices, name: str, shape: str = "polygon", cfg: ObstacleInputConfig | None = None
+) -> tuple[Obstacle, str | None]:
+    """(obstacle, note or None) of one drawn obstacle
+    (:func:`~parknss.sim.obstacles.drawn_obstacle`); the note says what was normalised."""
+    out = drawn_obstacle(vertices, name, shape, cfg)
+    parts = out.parts if len(out.parts) > 1 else ()
+    what = []
+    if out.removed:
+        what.append(f"{out.removed} duplicate/collinear vertices removed")
+    if out.wall:
+        what.append("drawn as a line: a wall")
+    if len(out.parts) > 1:
+        what.append(f"split into {len(out.parts)} convex parts")
+    return Obstacle(kind, out.vertices, parts), (f"{name}: {', '.join(what)}" if what else None)
+
+
+def _scene_from_json(data, source: str, cfg: ObstacleInputConfig | None = None) -> Scene:
+    cfg = cfg or ObstacleInputConfig()
     if not isinstance(data, dict):
         raise PlanningError(f"{source}: expected a JSON object at top level")
     if data.get("format", SCENE_FORMAT) != SCENE_FORMAT:
@@ -232,15 +277,28 @@ def _scene_from_json(data, source: str) -> Scene:
         raise PlanningError(f"{source}: bounds need xmin < xmax and ymin < ymax")
     if not isinstance(data["obstacles"], list):
         raise PlanningError(f"{source}: obstacles must be a list")
-    obstacles = []
-    for i, ob in enumerate(data["obstacles"]):
+    raw = data["obstacles"]
+    n_vertices = sum(
+        len(ob["vertices"])
+        for ob in raw
+        if isinstance(ob, dict) and isinstance(ob.get("vertices"), list)
+    )
+    check_counts(len(raw), n_vertices, source, cfg)  # before any work on them
+    obstacles, notes = [], []
+    for i, ob in enumerate(raw):
         if not isinstance(ob, dict) or "vertices" not in ob:
             raise PlanningError(f"{source}: obstacle {i} must be an object with 'vertices'")
         kind = ob.get("kind", "obstacle")
         if not isinstance(kind, str) or not kind:
             raise PlanningError(f"{source}: obstacle {i} kind must be a non-empty string")
-        verts = convex_polygon(ob["vertices"], f"{source}: obstacle {i} ({kind})")
-        obstacles.append(Obstacle(kind, verts))
+        name = f"{source}: obstacle {i} ({kind})"
+        if ob.get("holes") or ob.get("interiors"):
+            raise PlanningError(f"{name}: polygons with holes are not supported")
+        shape = ob.get("shape", "polygon")
+        obstacle, note = obstacle_from_drawing(kind, ob["vertices"], name, shape, cfg)
+        obstacles.append(obstacle)
+        if note:
+            notes.append(note)
     start = _numbers(data["start"], 3, "start [x, y, heading]", source)
     goal = _numbers(data["goal"], 3, "goal [x, y, heading]", source)
     meta_in = data.get("meta", {}) or {}
@@ -253,7 +311,7 @@ def _scene_from_json(data, source: str) -> Scene:
         meta = SceneMeta(**meta_in)
     except TypeError as exc:
         raise PlanningError(f"{source}: bad meta ({exc})") from exc
-    return Scene(bounds, tuple(obstacles), start, goal, meta)
+    return Scene(bounds, tuple(obstacles), start, goal, meta, tuple(notes))
 
 
 # ---------------------------------------------------------------------------------------
@@ -551,18 +609,29 @@ def cell_scene(
     return grid_scene(index, cfg, geom)
 
 
-def resolve_scene(spec: str, cfg: ScenariosConfig | None = None) -> Scene:
-    """A Scene from a JSON file path, a grid cell index 0-35, or ``robust:N`` (0-251)."""
+def resolve_scene(
+    spec: str, cfg: ScenariosConfig | None = None, geom: VehicleGeometry | None = None
+) -> Scene:
+    """A Scene from a file (scene JSON, TPCAP case CSV, CommonRoad XML), a grid cell index
+    0-35, or ``robust:N`` (0-251); grid scenes are built for the car ``geom``."""
     cfg = cfg if cfg is not None else load_scenarios_config()
     text = spec.strip()
     if text.isdigit():
-        return grid_scene(int(text), cfg)
+        return grid_scene(int(text), cfg, geom)
     if text.lower().startswith("robust:") and text[7:].isdigit():
-        return robust_scene(int(text[7:]), cfg)
+        return robust_scene(int(text[7:]), cfg, geom)
     path = Path(text)
-    if path.suffix.lower() == ".json" or path.exists():
-        return Scene.load(path)
-    raise PlanningError(f"--scene {spec!r}: not a scene file, a cell 0-35 or robust:N")
+    suffix = path.suffix.lower()
+    if suffix in (".csv", ".xml"):
+        raise PlanningError(
+            f"--scene {spec!r}: benchmark files are read by parknss.sim.scene_formats"
+        )
+    if suffix == ".json" or path.exists():
+        return Scene.load(path, cfg.obstacles)
+    raise PlanningError(
+        f"--scene {spec!r}: not a scene file (.json, TPCAP .csv, CommonRoad .xml), "
+        "a cell 0-35 or robust:N"
+    )
 
 
 def run_cells(

@@ -28,6 +28,7 @@ from parknss.sim.control.mpc import PreviewMpc
 from parknss.sim.planner import Plan, plan_scene
 from parknss.sim.planning.hybrid_astar import PlanningConfig
 from parknss.sim.plants import SimPlant, make_plant
+from parknss.sim.scene_formats import load_scene
 from parknss.sim.trajectory import Trajectory
 from parknss.vehicle import VehicleGeometry
 
@@ -44,11 +45,14 @@ def build_plant(kind: str, cfg: ClosedLoopConfig, geom: VehicleGeometry | None =
     )
 
 
-def check_plants(kinds: list[str], cfg: ClosedLoopConfig | None = None) -> None:
-    """Fail fast, with one line, when a plant of ``kinds`` cannot be built here."""
+def check_plants(
+    kinds: list[str], cfg: ClosedLoopConfig | None = None, geom: VehicleGeometry | None = None
+) -> None:
+    """Fail fast, with one line, when a plant of ``kinds`` cannot be built here (or, given
+    the car ``geom``, was identified on another car)."""
     cfg = cfg if cfg is not None else load_closed_loop_config()
     for kind in kinds:
-        build_plant(kind, cfg)
+        build_plant(kind, cfg, geom)
 
 
 def not_plannable(plant_name: str, plan: Plan) -> Outcome:
@@ -91,6 +95,7 @@ class SceneRun:
     scene: sc.Scene
     plan: Plan
     outcomes: list[Outcome]
+    geom: VehicleGeometry | None = None  # the car planned and driven (None: default car)
 
     def to_json(self) -> dict:
         """The summary ``parknss simulate --json`` prints (without figures): the plan
@@ -114,6 +119,8 @@ class SceneRun:
             doc[key] = first[key]
         doc["runs"] = [o.to_json() for o in self.outcomes]
         doc["plan"] = plan.to_json(self.scene)
+        if self.scene.notes:
+            doc["scene_notes"] = list(self.scene.notes)
         return doc
 
     def write_series(self, out: Path) -> dict[str, str]:
@@ -138,14 +145,17 @@ def write_series(series: dict[str, np.ndarray], path: Path) -> None:
 def simulate_scene(
     spec: str | sc.Scene, plants: list[str], files: SimConfigFiles | None = None
 ) -> SceneRun:
-    """Plan a scene (a scene JSON file, grid cell 0-35, ``robust:N``, or a Scene) once and
-    execute it under each plant, with the configs of ``files``."""
+    """Plan a scene (a scene file, grid cell 0-35, ``robust:N``, or a Scene) once and
+    execute it under each plant, with the configs and the car of ``files``."""
     files = files or SimConfigFiles()
     cfg = files.closed_loop_config()
-    check_plants(plants, cfg)
-    scene = spec if isinstance(spec, sc.Scene) else sc.resolve_scene(spec, files.scenarios_config())
-    plan, outcomes = run_cell(scene, plants, cfg, files.interface_config(), files.planning)
-    return SceneRun(scene, plan, outcomes)
+    geom = files.vehicle_geometry()
+    check_plants(plants, cfg, geom)
+    scene = (
+        spec if isinstance(spec, sc.Scene) else load_scene(spec, files.scenarios_config(), geom)
+    )
+    plan, outcomes = run_cell(scene, plants, cfg, files.interface_config(), files.planning, geom)
+    return SceneRun(scene, plan, outcomes, geom)
 
 
 def _f(v, spec: str) -> str:

@@ -167,13 +167,13 @@ def tune_gains(
     cfg = files.closed_loop_config()
     if plant is None:
         try:
-            check_plants(["chain"], cfg)
+            check_plants(["chain"], cfg, files.vehicle_geometry())
             plant = "chain"
         except ParknssError:
             plant = "reference"
             say("chain plant unavailable: tuning on the reference plant")
     kind = parse_plants(plant)[0]
-    check_plants([kind], cfg)
+    check_plants([kind], cfg, files.vehicle_geometry())
     tcfg = TuningConfig() if rounds is None else TuningConfig(rounds=rounds)
     start = files.interface_config()
     cells = grid_cells("12", files.scenarios_config())

@@ -7,6 +7,7 @@ Endpoints (docs/web.md has examples):
 * ``GET /api/scene?grid=36&index=26``: one grid scene as scene JSON.
 * ``POST /api/plan``: plan a cell or a scene JSON (optionally with an edited start).
 * ``POST /api/simulate``: plan (or reuse the plan) and execute it through one plant.
+* ``POST /api/import``: a TPCAP case (.csv) or CommonRoad scenario (.xml) as scene JSON.
 
 Every error is JSON ``{"error": "<one line>", "status": <code>}``: 400 malformed JSON,
 422 invalid request (unknown plant, cell out of range, non-finite numbers, bad
@@ -36,6 +37,8 @@ from parknss.web.schemas import (
     ErrorResponse,
     Grid,
     Health,
+    ImportRequest,
+    ImportResponse,
     PlanResponse,
     SceneRequest,
     SceneResponse,
@@ -131,6 +134,10 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
     @app.get("/api/scene", response_model=SceneResponse, responses=_ERRORS)
     def scene(index: int, grid: Grid = "36") -> SceneResponse:
         return service.scene_response(grid, index)
+
+    @app.post("/api/import", response_model=ImportResponse, responses=_ERRORS)
+    async def import_scene(req: ImportRequest) -> ImportResponse:
+        return await runner.run(cfg.plan_budget_s, "the import", service.import_scene, req)
 
     @app.post("/api/plan", response_model=PlanResponse, responses=_ERRORS)
     async def plan(req: SceneRequest) -> PlanResponse:

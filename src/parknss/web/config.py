@@ -35,6 +35,7 @@ class WebConfig(StrictModel):
     interface_config: str | None = Field(None, description="interface gains YAML")
     planning_config: str | None = Field(None, description="planning YAML")
     scenarios_config: str | None = Field(None, description="scenarios YAML")
+    vehicle: str | None = Field(None, description="vehicle YAML (None: the chain's car)")
     plant_colours: dict[str, str] = Field(
         default_factory=lambda: {
             "kinematic": "#00bcd4",

@@ -33,6 +33,20 @@ class SceneRequest(_Request):
         return self
 
 
+class ImportRequest(_Request):
+    """A benchmark scene file's text: a TPCAP case (.csv) or a CommonRoad scenario (.xml)."""
+
+    filename: str = Field(..., min_length=5, max_length=200, description="e.g. Case13.csv")
+    text: str = Field(..., max_length=5_000_000, description="the file's content")
+
+
+class ImportResponse(BaseModel):
+    """The imported scene (parknss.scene JSON) and what loading normalised."""
+
+    scene: dict[str, Any]
+    notes: list[str]
+
+
 class SimulateRequest(SceneRequest):
     """A scene, the plant that executes its plan, and an optional plant noise seed."""
 

@@ -13,9 +13,11 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import tempfile
 import threading
 from collections import OrderedDict
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -28,7 +30,9 @@ from parknss.sim.closed_loop import ClosedLoopConfig, load_closed_loop_config
 from parknss.sim.control.interface import load_interface_config
 from parknss.sim.planner import Plan, plan_scene
 from parknss.sim.plants import PLANT_KINDS
+from parknss.sim.scene_formats import read_scene_file
 from parknss.sim.session import build_plant, not_plannable, run_cell
+from parknss.sim.vehicles import resolve_vehicle
 from parknss.vehicle import VehicleGeometry
 from parknss.web import payload
 from parknss.web.config import WebConfig
@@ -37,6 +41,8 @@ from parknss.web.schemas import (
     CellInfo,
     CellList,
     Health,
+    ImportRequest,
+    ImportResponse,
     PlanResponse,
     PlantInfo,
     RunOutcome,
@@ -88,9 +94,9 @@ class SimulatorService:
 
     def __init__(self, cfg: WebConfig) -> None:
         self.cfg = cfg
-        self.geom = VehicleGeometry()
         self.scenarios = sc.load_scenarios_config(cfg.scenarios_config)
         self.closed_loop: ClosedLoopConfig = load_closed_loop_config(cfg.closed_loop_config)
+        self.geom: VehicleGeometry = resolve_vehicle(cfg.vehicle, self.closed_loop.chain_path)
         self.interface = load_interface_config(cfg.interface_config)
         self.cache = PlanCache(cfg.plan_cache_size)
         self._plan_lock = threading.Lock()
@@ -176,13 +182,31 @@ class SimulatorService:
             scene = self.grid_scene(req.grid, req.index)
         else:
             try:
-                scene = sc.Scene.from_json(req.scene, "scene")
+                scene = sc.Scene.from_json(req.scene, "scene", self.scenarios.obstacles)
             except ParknssError as exc:
                 raise BadSceneError(str(exc)) from exc
         if req.start is not None:
             scene = replace(scene, start=tuple(float(v) for v in req.start))
         self.check_start(scene)
         return scene
+
+    def import_scene(self, req: ImportRequest) -> ImportResponse:
+        """A TPCAP .csv or CommonRoad .xml file's text as scene JSON (for the service's car);
+        BadSceneError when the file is malformed or of another kind."""
+        suffix = Path(req.filename).suffix.lower()
+        if suffix not in (".csv", ".xml"):
+            raise BadSceneError(f"{req.filename}: import takes a TPCAP .csv or CommonRoad .xml")
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / Path(req.filename).name
+            path.write_text(req.text)
+            try:
+                scene = read_scene_file(path, self.scenarios.obstacles, self.scenarios.imports,
+                                        self.geom)
+            except ParknssError as exc:
+                raise BadSceneError(str(exc).replace(str(path), req.filename)) from exc
+        meta = replace(scene.meta, source=req.filename)
+        notes = [n.replace(str(path), req.filename) for n in scene.notes]
+        return ImportResponse(scene=replace(scene, meta=meta).to_json(), notes=notes)
 
     def check_start(self, scene: sc.Scene) -> None:
         """BadSceneError when the car at the start pose is off the map or hits an obstacle."""
@@ -192,7 +216,7 @@ class SimulatorService:
         if not geometry.inside_bounds(pose, self.geom, scene.bounds)[0]:
             raise BadSceneError(f"{where}: the car leaves the map {list(scene.bounds)}")
         for i, ob in enumerate(scene.obstacles):
-            if geometry.collides(pose, self.geom, [ob.vertices])[0]:
+            if np.any(geometry.collides(pose, self.geom, list(ob.convex_parts()))):
                 raise BadSceneError(f"{where}: the car overlaps obstacle {i} ({ob.kind})")
 
     # -- planning -----------------------------------------------------------------------

@@ -30,18 +30,25 @@ DT = 0.01
 class CheapCar:
     """1-D car: m·dv/dt = gear·max(τ, creep(v))·k − sign(v)·(brake + roll), at rest it
     stays while the resistances exceed the drive force; the gear engages after 0.2 s at
-    |v| <= 0.03 m/s (refused while faster). Measured vx = true vx."""
+    |v| <= 0.03 m/s (refused while faster). Measured vx = true vx, ax = its change."""
 
     k, mass, roll, creep_nm, creep_fade = 23.0, 2000.0, 240.0, 20.0, 1.1
     brake_per_ms2 = 2000.0  # N per m/s² of deceleration command
 
     def __init__(self) -> None:
         self.v, self.gear, self.pending, self.timer, self.steer = 0.0, 0, 0, 0.0, 0.0
+        self.ax = 0.0
 
     def output(self) -> PlantOutput:
-        return PlantOutput(self.gear, 0.0, 0.0, self.steer, self.v, 0.0, 0.0, 0.0)
+        return PlantOutput(self.gear, 0.0, 0.0, self.steer, self.v, 0.0, self.ax, 0.0)
 
     def step(self, cmd) -> PlantOutput:
+        v0 = self.v
+        self._step(cmd)
+        self.ax = (self.v - v0) / DT
+        return self.output()
+
+    def _step(self, cmd) -> PlantOutput:
         if cmd.gear != self.gear and abs(self.v) <= 0.03:
             self.timer = self.timer + DT if self.pending == cmd.gear else DT
             self.pending = cmd.gear
@@ -178,3 +185,89 @@ def test_bad_requests_and_configs_are_one_line_errors(tmp_path):
     bad.write_text("kp: 1.0\nbogus: 2\n")
     with pytest.raises(ConfigError, match="bogus"):
         load_interface_config(bad)
+
+
+class BlindZoneCar:
+    """Rolling back into the wheel-speed blind zone (issue 17, TPCAP case 13, chain plant):
+    the bus reads vx = 0 below 0.139 m/s while the car still rolls; the brake bites only
+    weakly for ``weak_s`` (0.1 m/s², as logged: 0.139 -> 0.108 m/s in 0.3 s), then at
+    the commanded deceleration. ``imu`` False: ax reads 0 (no IMU on the bus)."""
+
+    def __init__(self, v0: float = -0.2, weak_s: float = 0.8, imu: bool = True) -> None:
+        self.v, self.t, self.weak_s, self.imu, self.gear, self.ax = v0, 0.0, weak_s, imu, -1, 0.0
+
+    def output(self) -> PlantOutput:
+        vx = self.v if abs(self.v) >= 0.5 / 3.6 else 0.0
+        return PlantOutput(self.gear, 0.0, 0.0, 0.0, vx, 0.0, self.ax if self.imu else 0.0, 0.0)
+
+    def step(self, cmd) -> PlantOutput:
+        decel = 0.1 if self.t < self.weak_s else -cmd.decel_cmd
+        v_new = self.v + decel * DT if self.v < 0 else 0.0
+        v_new = min(v_new, 0.0)
+        self.ax = (v_new - self.v) / DT
+        self.v, self.t = v_new, self.t + DT
+        self.gear = cmd.gear
+        return self.output()
+
+
+@pytest.mark.parametrize("imu", [True, False])
+def test_standstill_is_not_confirmed_while_rolling_in_the_blind_zone(imu):
+    """Issue 17: confirmed after 0.3 s below 0.139 m/s while still rolling at 0.108 m/s.
+    Now the last measured speed is accounted for (ax, else the time the full hold needs):
+    no gear change while the true speed is not 0, and the shift still comes."""
+    cfg = InterfaceConfig()
+    car, iface = BlindZoneCar(imu=imu), CommandInterface(cfg, DT)
+    iface.gear, iface.mode = -1, "drive"  # reversing at 0.2 m/s, now asked to go forward
+    y = car.output()
+    shifted_at = None
+    for k in range(400):
+        cmd = iface.step(Request(1, 0.3, 0.0), y)
+        if cmd.gear == 1 and shifted_at is None:
+            shifted_at = k * DT
+            assert car.v == 0.0, f"shifted R->D at {car.v:.3f} m/s (t={shifted_at:.2f} s)"
+        if iface.standstill:
+            assert car.v == 0.0
+        y = car.step(cmd)
+    assert shifted_at is not None and shifted_at < 3.0
+
+
+def test_standstill_without_blind_zone_is_as_quick_as_before():
+    """A plant that reports its stop (the kinematic plant: vx and ax exact) is confirmed
+    after ``standstill_time_s``, as before the blind-zone rule."""
+    cfg = InterfaceConfig()
+    iface = CommandInterface(cfg, DT)
+    iface.gear, iface.mode = 1, "drive"
+    moving = PlantOutput(1, 0.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0)
+    iface.step(Request(1, 0.3, 0.0), moving)
+    iface.step(Request(1, 0.0, 0.0), moving)  # the stop request: hold; the plant stops at once
+    stopped_now = PlantOutput(1, 0.0, 0.0, 0.0, 0.0, 0.0, -0.3 / DT, 0.0)
+    stopped = PlantOutput(1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    iface.step(Request(1, 0.0, 0.0), stopped_now)
+    steps = 1
+    while not iface.standstill:
+        iface.step(Request(1, 0.0, 0.0), stopped)
+        steps += 1
+    assert steps * DT == pytest.approx(cfg.standstill_time_s, abs=DT + 1e-9)
+
+
+@pytest.mark.parametrize("lock", [300.0, 400.0, 519.96])
+def test_steer_cmd_is_clamped_at_the_cars_lock(lock):
+    """Issue 17: the clamp was 400° whatever the car; it is the car's lock now."""
+    iface = CommandInterface(InterfaceConfig(), DT, steer_lock_deg=lock)
+    y = PlantOutput(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    assert iface.step(Request(0, 0.0, 1000.0), y).steer_cmd == pytest.approx(lock)
+    assert iface.step(Request(0, 0.0, -1000.0), y).steer_cmd == pytest.approx(-lock)
+    assert iface.step(Request(0, 0.0, 450.0), y).steer_cmd == pytest.approx(min(450.0, lock))
+    with pytest.raises(ConfigError, match="steering lock"):
+        CommandInterface(InterfaceConfig(), DT, steer_lock_deg=0.0)
+
+
+def test_every_plant_clamps_at_its_own_lock():
+    from parknss.sim.plants import KinematicPlant
+    from parknss.vehicle import load_vehicle_geometry
+
+    tpcap = load_vehicle_geometry(CONFIG_DIR / "tpcap_vehicle.yaml")
+    plant = KinematicPlant(tpcap)
+    iface = plant.command_interface(InterfaceConfig(), DT)
+    y = plant.reset()
+    assert iface.step(Request(0, 0.0, 600.0), y).steer_cmd == pytest.approx(tpcap.steer_lock_deg)

@@ -3,9 +3,19 @@
 Three parts, run once per 10 ms on what the car's bus reports (measured vx, engaged gear):
 
 * **Gear state machine.** The commanded gear follows the requested direction (+1 drive,
-  -1 reverse, 0 park) only at confirmed standstill: the brake-hold applied and the
-  measured |vx| below ``standstill_speed_ms`` for ``standstill_time_s`` without a break;
-  reverse <-> drive shifts go directly, never through neutral. Park (gear 0) pins the
+  -1 reverse, 0 park) only at confirmed standstill: the brake-hold applied, the measured
+  |vx| below ``standstill_speed_ms`` for ``standstill_time_s`` without a break, *and* the
+  car's speed accounted for down to zero. The wheel-speed sensor reads 0 inside its blind
+  zone (|vx| < 0.139 m/s), so a car still rolling at 0.1 m/s reads like one at rest; the
+  interface therefore starts from the last speed it measured (the blind-zone edge when
+  it last read 0 while driving) and integrates the deceleration the car reports along
+  its motion (ax) down to 0. Should ax not show the stop (a biased or missing IMU), the
+  hold itself settles it: once the commanded hold has ramped to ``hold_max_ms2`` and
+  ``standstill_brake_lag_s`` has passed, the time that deceleration needs to stop the
+  last measured speed. A speed sensor that does read inside the band (|vx| >=
+  ``standstill_read_ms``, e.g. the learned chain's output) is believed: the car moves.
+  Only then does the confirmation count. Reverse <-> drive shifts
+  go directly, never through neutral. Park (gear 0) pins the
   state at rest: torque_cmd is 0 whenever the commanded gear is 0 (neutral/park never
   carries torque), and the brake-hold stays applied.
 * **Longitudinal controller.** A PI on the speed along the gear direction with request
@@ -61,7 +71,15 @@ class InterfaceConfig(StrictModel):
     hold_max_ms2: float = Field(2.0, gt=0, description="brake-hold ceiling, m/s²")
     launch_torque_nm: float = Field(28.0, ge=0, description="minimum launch torque, N·m")
     launch_rate_nms: float = Field(150.0, gt=0, description="launch torque ramp, N·m/s")
-    steer_lock_deg: float = Field(400.0, gt=0, description="steer_cmd clamp, ±deg")
+    standstill_read_ms: float = Field(
+        0.02, gt=0, description="a measured |vx| at or above this inside the band is motion, m/s"
+    )
+    standstill_brake_lag_s: float = Field(
+        0.3, ge=0, description="brake-hold assumed to act this long after it is commanded, s"
+    )  # used only when ax does not show the stop (see hold_settle_s)
+    steer_lock_deg: float = Field(
+        400.0, gt=0, description="steer_cmd clamp without a vehicle, ±deg (else the car's lock)"
+    )
     steer_rate_dps: float = Field(0.0, ge=0, description="steer_cmd slew limit (0: none), deg/s")
 
 
@@ -92,11 +110,25 @@ class Request:
 
 
 class CommandInterface:
-    """Turns :class:`Request` into :class:`~parknss.plant.Commands` (see module docstring)."""
+    """Turns :class:`Request` into :class:`~parknss.plant.Commands` (see module docstring).
 
-    def __init__(self, cfg: InterfaceConfig | None = None, dt: float = DT) -> None:
+    ``steer_lock_deg`` is the car's steering-wheel lock (deg): steer_cmd is clamped to it
+    (every closed-loop plant passes its vehicle's); None: the config's ``steer_lock_deg``.
+    """
+
+    def __init__(
+        self,
+        cfg: InterfaceConfig | None = None,
+        dt: float = DT,
+        steer_lock_deg: float | None = None,
+    ) -> None:
         self.cfg = cfg or InterfaceConfig()
         self.dt = float(dt)
+        self.steer_lock_deg = float(
+            self.cfg.steer_lock_deg if steer_lock_deg is None else steer_lock_deg
+        )
+        if not (math.isfinite(self.steer_lock_deg) and self.steer_lock_deg > 0):
+            raise ConfigError(f"command interface: steering lock {steer_lock_deg!r} deg")
         self.reset()
 
     def reset(self) -> None:
@@ -111,11 +143,42 @@ class CommandInterface:
         self.speed_target = 0.0
         self.steer = 0.0
         self.shifts = 0
+        self.speed_left = 0.0  # speed not yet accounted for down to 0, m/s (>= 0)
+        self.speed_entry = 0.0  # the speed last measured before the hold, m/s
+        self.hold_time = 0.0  # time since the brake-hold was commanded, s
+        self.motion_sign = 0  # direction of the last measured motion, ±1 (0: none yet)
 
     @property
     def standstill(self) -> bool:
-        """Standstill confirmed: held with measured |vx| in the band for the confirm time."""
-        return self.still_time >= self.cfg.standstill_time_s - 1e-9
+        """Standstill confirmed: held, measured |vx| in the band for the confirm time, and
+        the last measured speed accounted for down to 0 (module docstring)."""
+        return self.still_time >= self.cfg.standstill_time_s - 1e-9 and self.speed_left <= 0.0
+
+    def _track_speed(self, u: float, ax: float) -> None:
+        """Update the speed still unaccounted for from the measured vx and ax (m/s, m/s²)."""
+        c, dt = self.cfg, self.dt
+        if u != 0.0:
+            self.motion_sign = 1 if u > 0 else -1
+        if self.mode != HOLD or abs(u) >= c.standstill_speed_ms:
+            # a reading is the speed; a 0 while driving may be anything in the blind zone
+            self.speed_left = abs(u) if u != 0.0 or self.mode == HOLD else c.standstill_speed_ms
+            self.speed_entry = self.speed_left
+            return
+        if abs(u) >= c.standstill_read_ms:  # a sensor that reads inside the band: it moves
+            self.speed_left = abs(u)
+            return
+        decel = -self.motion_sign * ax if self.motion_sign else 0.0
+        self.speed_left = min(max(self.speed_left - decel * dt, 0.0), c.standstill_speed_ms)
+        if self.hold_time >= self.hold_settle_s(self.speed_entry) - 1e-9:
+            self.speed_left = 0.0
+
+    def hold_settle_s(self, speed: float) -> float:
+        """Time (s) after which the brake-hold has stopped a car at ``speed`` (m/s) whatever
+        ax says: the brake lag, the ramp to ``hold_max_ms2``, then speed / hold_max."""
+        c = self.cfg
+        ramp = (c.hold_max_ms2 - c.hold_decel_ms2) / c.hold_ramp_ms3 if c.hold_ramp_ms3 else 0.0
+        top = c.hold_max_ms2 if c.hold_ramp_ms3 else c.hold_decel_ms2
+        return c.standstill_brake_lag_s + ramp + speed / top
 
     def step(self, req: Request, y: PlantOutput) -> Commands:
         """One 10 ms update from the request and the bus output ``y`` of this sample."""
@@ -133,6 +196,8 @@ class CommandInterface:
         if req.speed < 0.0:
             raise ParknssError(f"command interface: request speed {req.speed!r} < 0")
         speed, u = req.speed, y.vx
+        self.hold_time = self.hold_time + dt if self.mode == HOLD else 0.0
+        self._track_speed(u, y.ax if math.isfinite(y.ax) else 0.0)
         still = self.mode == HOLD and abs(u) < c.standstill_speed_ms
         self.still_time = self.still_time + dt if still else 0.0
         if req.direction != self.gear and self.mode == HOLD and self.standstill:
@@ -193,8 +258,8 @@ class CommandInterface:
 
     def _steer(self, target: float) -> float:
         """Clamp (and optionally slew-limit) the steering request, deg."""
-        c = self.cfg
-        t = min(max(target, -c.steer_lock_deg), c.steer_lock_deg)
+        c, lock = self.cfg, self.steer_lock_deg
+        t = min(max(target, -lock), lock)
         if c.steer_rate_dps > 0.0:
             step = c.steer_rate_dps * self.dt
             t = self.steer + min(max(t - self.steer, -step), step)

@@ -290,6 +290,7 @@ class HybridAStar:
     def _plan(self, scene, stats: PlanStats, t0: float) -> PlanResult:
         c = self.cfg
         obstacles = scene.obstacle_arrays()
+        deadline = t0 + c.time_budget_s
         early = self._precheck(scene, obstacles)
         if early is not None:
             return early
@@ -305,6 +306,8 @@ class HybridAStar:
             max_step=c.dense.max_step_m,
             max_dheading=math.radians(c.dense.max_dheading_deg),
         )
+        if time.perf_counter() > deadline:
+            return self._out_of_time(stats, t0, "building the collision field")
         self._checker = checker
         self._scene = scene
         self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
@@ -322,6 +325,8 @@ class HybridAStar:
         cap = max(need, checker.reach + sweep + checker.need) + 1.0
         grid = HolonomicGrid(obstacles, scene.bounds, need, c.holonomic_resolution_m, cap)
         checker.set_broad_phase(grid.dist_obstacle, grid.x0, grid.y0, grid.res)
+        if time.perf_counter() > deadline:
+            return self._out_of_time(stats, t0, "building the heuristic grid")
         holo_goal = grid.heuristic(goal[:2])
         if not math.isfinite(holo_goal(*start[:2])):
             return PlanResult(
@@ -336,7 +341,16 @@ class HybridAStar:
             holo_start = grid.heuristic(start[:2])
             trees.append(_Tree(self._root(goal, clr[1], holo_start), start, holo_start, True))
         stats.setup_time_s += time.perf_counter() - t1
-        return self._search(trees, stats, t0 + c.time_budget_s)
+        return self._search(trees, stats, deadline)
+
+    def _out_of_time(self, stats: PlanStats, t0: float, where: str) -> PlanResult:
+        """The budget ran out while preparing the search (the budget covers setup too)."""
+        stats.setup_time_s = time.perf_counter() - t0
+        return PlanResult(
+            False,
+            "time budget exhausted",
+            detail=f"{where}: {self.cfg.time_budget_s} s used before the search began",
+        )
 
     def _root(self, pose, clr: float, holo: HolonomicHeuristic) -> _Node:
         return _Node(pose, 0.0, -1, 0.0, 0, 0.0, holo(*pose[:2]), self._key(pose, clr), clr)

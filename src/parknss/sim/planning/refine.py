@@ -15,7 +15,12 @@ acceleration and steering-rate smoothness plus deviation from the warm start
 
 The result is sampled every ``output_step_m`` of travel (exact on the solution's arcs),
 with speed (>= 0, 0 at each segment end), steering-wheel angle (deg) and time (s), and
-re-checked with the exact dense check (:func:`verify_trajectory`). If IPOPT fails or
+re-checked with the exact dense check (:func:`verify_trajectory`). Every refined path
+stays within the steering lock of ``geom`` (curvature <= tan(δ_max)/L, relative
+tolerance :data:`KAPPA_RTOL`): the solver's end offset is blended in only where the path
+has curvature to spare (:func:`~.refine_profile.blend_weights`), and a segment with too
+little to spare (driven at the lock almost throughout) keeps its coarse poses, which lie
+on the lock exactly, with a trapezoidal profile (``status: kept (at the lock)``). If IPOPT fails or
 hits its iteration or CPU-time limit, or the dense check fails, the result has
 ``ok=False``, the reason, and the coarse path with a trapezoidal speed profile as
 ``source="coarse_fallback"``. Malformed input raises :class:`PlanningError`.
@@ -40,11 +45,20 @@ from parknss.sim.planning.hybrid_astar import (
 from parknss.sim.planning.refine_config import RefineConfig
 from parknss.sim.planning.refine_obca import obstacle_terms, rewarm
 from parknss.sim.planning.refine_problem import limits, solve_segment
-from parknss.sim.planning.refine_profile import profile_segment, sample_solution, warm_start
+from parknss.sim.planning.refine_profile import (
+    profile_segment,
+    sample_solution,
+    step_curvature,
+    warm_start,
+)
 from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry
 
-__all__ = ["RefineConfig", "RefineResult", "coarse_fallback", "refine"]
+KAPPA_RTOL = 1e-6
+"""Relative tolerance of the lock check on a refined segment's curvature (IPOPT meets its
+bounds to ~1e-8; the end-pose blend never uses more than half the spare curvature)."""
+
+__all__ = ["KAPPA_RTOL", "RefineConfig", "RefineResult", "coarse_fallback", "refine"]
 
 
 @dataclass
@@ -166,11 +180,12 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         ws.poses, obstacles, geom, lim.d_min + cfg.broadphase_m, cfg.broadphase_knots
     )
     n = len(ws.poses) - 1
+    kappa_max = math.tan(lim.delta_max) / geom.wheelbase
     d_min = np.full(n + 1, lim.d_min)
     detail: dict = {"intervals": n, "obstacles": len(terms), "iterations": 0, "repairs": 0}
     sol = None
     ends = (seg.poses[0], seg.poses[-1])
-    for round_ in range(cfg.repair_rounds + 1):
+    for _ in range(cfg.repair_rounds + 1):
         left = cfg.cpu_time_s - (time.process_time() - cpu0)
         if left <= 0:
             detail["failure"] = f"CPU budget of {cfg.cpu_time_s:g} s used up"
@@ -184,10 +199,15 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
             detail["failure"] = f"IPOPT {sol.status}"
             return None, detail
         out = sample_solution(sol, seg.direction, ends, geom, cfg.output_step_m, cfg.end_blend_m)
+        if np.abs(step_curvature(out.poses)).max(initial=0.0) > kappa_max * (1 + KAPPA_RTOL):
+            # a segment driven at the lock almost throughout has too little curvature to
+            # spare for the end offset: keep its coarse poses (exact ends, at the lock)
+            detail["status"] = "kept (at the lock)"
+            return profile_segment(seg, cfg.speed_max_ms, cfg.accel_max_ms2), detail
         short = _short_intervals(out, sol.h, n, obstacles, geom, pcfg, margin)
         if not short:
             return out, detail
-        if round_ == cfg.repair_rounds:
+        if detail["repairs"] == cfg.repair_rounds:
             break
         detail["repairs"] += 1
         for k, deficit in short.items():

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parknss.sim import geometry
+from parknss.sim.obstacles import clean_vertices
 from parknss.vehicle import VehicleGeometry
 
 
@@ -95,15 +96,30 @@ def _closest_direction(fp: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return vec / np.maximum(np.hypot(vec[:, 0], vec[:, 1]), 1e-12)[:, None]
 
 
+def strict_polygon(poly: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """``poly`` (M, 2) without duplicate or collinear vertices (judged in a local frame), so
+    consecutive edge normals are never parallel: the dual warm start divides by their
+    cross product."""
+    v = np.asarray(poly, dtype=float)
+    kept, removed = clean_vertices(v - v[0], tol, closed=True)
+    return kept + v[0] if removed and len(kept) >= 3 else v
+
+
 def dual_warm_start(poses: np.ndarray, poly: np.ndarray, A: np.ndarray, geom: VehicleGeometry):
-    """(λ (M, N), μ (4, N)) at rear-axle poses (N, 3): the dual optimum of the distance."""
+    """(λ (M, N), μ (4, N)) at rear-axle poses (N, 3): the dual optimum of the distance.
+
+    Consecutive parallel normals (a collinear vertex) span no cone; they are skipped
+    rather than divided by zero."""
     fp = geometry.footprints(poses, geom)
     w = _closest_direction(fp, poly)  # (N, 2)
     a0, a1 = A, np.roll(A, -1, axis=0)  # consecutive normals (M, 2)
-    det = a0[:, 0] * a1[:, 1] - a0[:, 1] * a1[:, 0]  # > 0 for a convex CCW polygon
-    c0 = (w[:, None, 0] * a1[None, :, 1] - w[:, None, 1] * a1[None, :, 0]) / det
-    c1 = (a0[None, :, 0] * w[:, None, 1] - a0[None, :, 1] * w[:, None, 0]) / det
-    pick = np.minimum(c0, c1).argmax(axis=1)  # the cone that contains w
+    det = a0[:, 0] * a1[:, 1] - a0[:, 1] * a1[:, 0]  # > 0 for a strictly convex CCW polygon
+    ok = det > 1e-12
+    safe = np.where(ok, det, 1.0)
+    c0 = (w[:, None, 0] * a1[None, :, 1] - w[:, None, 1] * a1[None, :, 0]) / safe
+    c1 = (a0[None, :, 0] * w[:, None, 1] - a0[None, :, 1] * w[:, None, 0]) / safe
+    score = np.where(ok[None, :], np.minimum(c0, c1), -np.inf)
+    pick = score.argmax(axis=1)  # the cone that contains w
     rows = np.arange(len(poses))
     m = len(A)
     lam = np.zeros((len(poses), m))
@@ -136,6 +152,7 @@ def obstacle_terms(
         return terms
     fp = geometry.footprints(poses, geom)
     for poly in obstacles:
+        poly = strict_polygon(poly)
         near = geometry.distance(fp, poly) < reach_m
         if window:
             idx = np.flatnonzero(near)

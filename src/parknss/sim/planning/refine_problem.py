@@ -124,6 +124,31 @@ def solve_segment(
     distance bounds, m (default ``lim.d_min``); ``init`` an earlier solution to start
     from instead of ``ws`` (the terms' duals should then be re-warmed at its poses).
     """
+    try:
+        opti, X, U, h = _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init)
+        sol = opti.solve_limited()
+        val = sol.value
+        stats = opti.stats()
+    except Exception as exc:  # any CasADi/IPOPT error (set_initial, evaluation) fails
+        first = (str(exc).splitlines() or [type(exc).__name__])[0][:80]
+        return _failed(ws, f"solver error ({type(exc).__name__}: {first})")
+    status = str(stats.get("return_status", "unknown"))
+    Xv, Uv = np.asarray(val(X)), np.atleast_2d(np.asarray(val(U)))
+    return SegmentSolution(
+        poses=Xv[0:3].T.copy(),
+        speed=np.clip(Xv[3], 0.0, lim.v_max),  # IPOPT meets bounds to ~1e-8 (relaxed)
+        delta=np.clip(Xv[4], -lim.delta_max, lim.delta_max),
+        accel=Uv[0].copy(),
+        rate=Uv[1].copy(),
+        h=float(val(h)),
+        status=status,
+        success=status in SUCCESS,
+        iterations=int(stats.get("iter_count", -1)),
+    )
+
+
+def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init):
+    """The Opti problem of :func:`solve_segment`: (opti, X, U, h)."""
     n = len(ws.poses) - 1
     dmin = np.full(n + 1, lim.d_min) if d_min is None else np.asarray(d_min, dtype=float)
     d = float(ws.direction)
@@ -237,25 +262,7 @@ def solve_segment(
             "mu_strategy": cfg.mu_strategy,
         },
     )
-    try:
-        sol = opti.solve_limited()
-        val = sol.value
-    except RuntimeError as exc:  # e.g. an evaluation error at the initial point
-        return _failed(ws, f"solver error ({str(exc).splitlines()[0][:60]})")
-    stats = opti.stats()
-    status = str(stats.get("return_status", "unknown"))
-    Xv, Uv = np.asarray(val(X)), np.atleast_2d(np.asarray(val(U)))
-    return SegmentSolution(
-        poses=Xv[0:3].T.copy(),
-        speed=np.clip(Xv[3], 0.0, lim.v_max),  # IPOPT meets bounds to ~1e-8 (relaxed)
-        delta=np.clip(Xv[4], -lim.delta_max, lim.delta_max),
-        accel=Uv[0].copy(),
-        rate=Uv[1].copy(),
-        h=float(val(h)),
-        status=status,
-        success=status in SUCCESS,
-        iterations=int(stats.get("iter_count", -1)),
-    )
+    return opti, X, U, h
 
 
 def _failed(ws: WarmStart, status: str) -> SegmentSolution:

@@ -156,7 +156,8 @@ def sample_solution(
         interval's arc (knots included), speed (>= 0, 0 at the end), steering-wheel angle (deg)
         and time (s). Intervals without travel add no pose; their time carries over. The first
     and last poses are ``ends``; the solver met the end pose within its tolerance box, and
-    that offset is blended in linearly over the last ``blend`` m."""
+    that offset is blended in (:func:`blend_weights`: over the last ``blend`` m where the
+    path has curvature to spare below the lock, else over the whole segment)."""
     p, v, de, h = sol.poses, np.maximum(sol.speed, 0.0), sol.delta, sol.h
     start_pose, end_pose = (np.asarray(e, dtype=float) for e in ends)
     n = len(p) - 1
@@ -182,17 +183,51 @@ def sample_solution(
     if len(poses) < 2:  # no travel at all: keep the two end poses
         poses = np.vstack([start_pose, end_pose])
         speed, delta, t = np.zeros(2), de[[0, -1]], np.array([0.0, n * h])
-    # the solver met the end pose to its tolerance box: blend the offset in over the last
-    # ``blend`` m so the path ends exactly on it without a kink
+    # the solver met the end pose to its tolerance box: blend the offset in so the path
+    # ends exactly on it without a kink and without exceeding the lock (blend_weights)
     err = end_pose - poses[-1]
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poses[:, :2], axis=0).T))])
-    w = np.clip((arc - (arc[-1] - blend)) / max(blend, 1e-9), 0.0, 1.0)
+    err[2] = (err[2] + math.pi) % (2 * math.pi) - math.pi
+    kappa_max = math.tan(math.radians(geom.steer_lock_deg / geom.steer_ratio)) / geom.wheelbase
+    w = blend_weights(poses, kappa_max, blend, abs(float(err[2])))
     poses = poses + w[:, None] * err[None, :]
     poses[0], poses[-1] = start_pose, end_pose
     speed[0] = speed[-1] = 0.0  # standstill by constraint, to solver tolerance
     t[-1] = n * h
     steer = np.degrees(delta) * geom.steer_ratio
     return Segment(poses, direction, speed=speed, steer=steer, t=t)
+
+
+def step_curvature(poses: np.ndarray) -> np.ndarray:
+    """(P-1,) curvature (1/m) between consecutive poses (P, 3+): the wrapped heading change
+    over the length of the arc through both (chord / sinc(Δθ/2)); 0 where poses coincide."""
+    p = np.asarray(poses, dtype=float)
+    dth = (np.diff(p[:, 2]) + math.pi) % (2 * math.pi) - math.pi
+    ds = np.hypot(*np.diff(p[:, :2], axis=0).T) / np.sinc(0.5 * dth / math.pi)
+    return np.where(ds > 1e-12, dth / np.maximum(ds, 1e-12), 0.0)
+
+
+def blend_weights(poses: np.ndarray, kappa_max: float, blend: float, dheading: float):
+    """(P,) weights 0 -> 1 along poses (P, 3) with which an end-pose offset is blended in.
+
+    The weight of each step is the heading change it has to spare below the lock
+    (kappa_max · ds - |Δθ|, rad), so a heading offset ``dheading`` (rad) is added only
+    where the curvature stays under ``kappa_max`` (1/m): on a full-lock arc the offset is
+    carried unchanged, and the path keeps within the lock whenever the spare heading
+    change is at least twice the offset. The last ``blend`` m are used when they have
+    enough to spare, else the whole segment; a path with none to spare anywhere falls
+    back to a linear blend over the last ``blend`` m (the caller checks the curvature).
+    """
+    p = np.asarray(poses, dtype=float)
+    ds = np.hypot(*np.diff(p[:, :2], axis=0).T)
+    dth = np.abs((np.diff(p[:, 2]) + math.pi) % (2 * math.pi) - math.pi)
+    spare = np.maximum(kappa_max * ds - dth, 0.0)
+    arc = np.concatenate([[0.0], np.cumsum(ds)])
+    tail = arc[1:] > arc[-1] - blend
+    for use in (spare * tail, spare):
+        total = float(use.sum())
+        if total > 0.0 and total >= 2.0 * dheading:
+            return np.concatenate([[0.0], np.cumsum(use)]) / total
+    return np.clip((arc - (arc[-1] - blend)) / max(blend, 1e-9), 0.0, 1.0)
 
 
 def profile_segment(seg: Segment, v_max: float, a_max: float) -> Segment:

@@ -964,11 +964,23 @@ function openSceneFile(file) {
   const reader = new FileReader();
   reader.onload = async () => {
     let scene;
-    try {
-      scene = JSON.parse(reader.result);
-    } catch (err) {
-      showError(`${file.name}: not valid JSON (${err.message})`);
-      return;
+    if (/\.(csv|xml)$/i.test(file.name)) {
+      // a TPCAP case or a CommonRoad scenario: the server turns it into scene JSON
+      let doc;
+      try {
+        doc = await api("/api/import", { filename: file.name, text: reader.result });
+      } catch (err) {
+        showError(err.message);
+        return;
+      }
+      scene = doc.scene;
+    } else {
+      try {
+        scene = JSON.parse(reader.result);
+      } catch (err) {
+        showError(`${file.name}: not valid JSON (${err.message})`);
+        return;
+      }
     }
     const ok = scene && Array.isArray(scene.bounds) && Array.isArray(scene.obstacles) &&
       Array.isArray(scene.start) && Array.isArray(scene.goal);
