@@ -1,61 +1,154 @@
-"""Real-time step latency of the deployed chain (one vehicle, one 10 ms sample per call).
+"""Speed of the chain's 10 ms step, every implementation in one run, as ratios to real time.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_chain.py [CHAIN] [--steps N] [--json]
 
-Replays a logged command stream of the default campaign through ``DeployedChain.step``
-(the Plant interface the simulator uses) and reports the median, 10th and 90th
-percentile of the per-step wall time in µs and the real-time factor 10 ms / median.
+Replays the longest logged command stream of the default campaign and reports, for each
+implementation, the median time per 10 ms step and the real-time factor 10 ms / step:
+
+* ``c_fmu``: the generated C step inside the FMU's binary (``pk_run`` of
+  binaries/linux64/parknss_chain.so over the whole stream, one call);
+* ``fmi2_dostep``: the same FMU through FMPy's FMI 2.0 ``doStep`` (10 ms), one call a step;
+* ``python_native``: ``DeployedChain.step`` (the Plant protocol) with the generated C
+  through ctypes (``engine="native"``);
+* ``python_numpy``: ``DeployedChain.step`` with the NumPy twin (the reference
+  implementation, the default engine);
+* ``onnxruntime``: the ONNX step graph (``parknss export onnx``), one session run a step;
+* ``pytorch``: the chain's torch rollout (``Chain.rollout``, one trial, per sample).
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
+import tempfile
 import time
+import zipfile
+from pathlib import Path
 
 import numpy as np
 
 from parknss.config import SHIPPED_CHAIN
 from parknss.plant import Commands
 
+CMDS = ("gear", "torque_cmd", "decel_cmd", "steer_cmd")
+
+
+def _per_step(fn, n: int, repeats: int = 5) -> float:
+    """Median over ``repeats`` of the time of fn() divided by n, in µs."""
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append((time.perf_counter() - t0) / n)
+    return float(np.median(ts) * 1e6)
+
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("chain", nargs="?", default=str(SHIPPED_CHAIN))
-    ap.add_argument("--steps", type=int, default=5000)
+    ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     import torch
 
     from parknss.chain import load_chain
+    from parknss.export.fmu import export_fmu
+    from parknss.export.onnx_step import chain_state, export_onnx
     from parknss.nss.campaigns import default_campaign
 
     torch.set_num_threads(1)
-    dep = load_chain(a.chain)
     tr = max(default_campaign(), key=lambda t: t.n)
-    cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd"))
+    cm = tr.array(CMDS)[: a.steps]
+    n = len(cm)
+    x0, y0 = [tr["vx"][0], tr["yaw_rate"][0]], [tr["torque"][0], tr["brake_pressure"][0],
+                                                   tr["steer"][0]]
     cmds = [Commands(int(r[0]), float(r[1]), float(r[2]), float(r[3])) for r in cm]
-    dep.reset()
-    for c in cmds[:200]:  # warm-up
-        dep.step(c)
-    dep.reset()
-    ts = np.empty(a.steps)
-    for k in range(a.steps):
-        c = cmds[k % len(cmds)]
-        t0 = time.perf_counter()
-        dep.step(c)
-        ts[k] = time.perf_counter() - t0
-    us = ts * 1e6
-    doc = {"chain": a.chain, "steps": a.steps, "median_us": float(np.median(us)),
-           "p10_us": float(np.percentile(us, 10)), "p90_us": float(np.percentile(us, 90)),
-           "real_time_factor": float(dep.dt * 1e6 / np.median(us)),
-           "specs": dep.chain.specs()}
+    res: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        fmu = export_fmu(Path(tmp) / "chain.fmu", a.chain).path
+        onnx_path = export_onnx(Path(tmp) / "chain.onnx", chain_dir=a.chain).path
+        lib_path = Path(tmp) / "fmu.so"
+        lib_path.write_bytes(zipfile.ZipFile(fmu).read("binaries/linux64/parknss_chain.so"))
+        lib = ctypes.CDLL(str(lib_path))
+        lib.pk_size.restype = ctypes.c_size_t
+        dp = ctypes.POINTER(ctypes.c_double)
+        state = ctypes.create_string_buffer(lib.pk_size())
+        c = np.ascontiguousarray(cm, dtype=np.float64)
+        out = np.empty((n, 8))
+        args = [(ctypes.c_double * k)(*v) for k, v in ((2, x0), (3, y0), (4, cm[0]))]
+
+        def c_run():
+            lib.pk_start(state, *args)
+            lib.pk_run(state, c.ctypes.data_as(dp), ctypes.c_long(n), out.ctypes.data_as(dp))
+
+        res["c_fmu"] = _per_step(c_run, n)
+
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        md = read_model_description(str(fmu))
+        unz = extract(str(fmu))
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=unz,
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName="b")
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        vrs = [0, 1, 2, 3]
+
+        def fmi_run():
+            for k in range(n):
+                slave.setReal(vrs, list(cm[k]))
+                slave.doStep(currentCommunicationPoint=k * 0.01, communicationStepSize=0.01)
+
+        res["fmi2_dostep"] = _per_step(fmi_run, n, repeats=3)
+        slave.terminate()
+        slave.freeInstance()
+
+        for engine in ("native", "numpy"):
+            dep = load_chain(a.chain, engine=engine)
+
+            def plant_run(dep=dep):
+                dep.reset()
+                for cmd in cmds:
+                    dep.step(cmd)
+
+            res[f"python_{engine}"] = _per_step(plant_run, n, repeats=3)
+
+        import onnxruntime as ort
+
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = so.inter_op_num_threads = 1
+        sess = ort.InferenceSession(str(onnx_path), so, providers=["CPUExecutionProvider"])
+        dep = load_chain(a.chain)
+        dep.start(x0, y0, cm[0])
+        s0 = chain_state(dep.rt).astype(np.float32)
+        c32 = cm.astype(np.float32)
+        m = min(n, 1000)
+
+        def ort_run():
+            s = s0
+            for k in range(m):
+                s, _ = sess.run(None, {"state": s, "command": c32[k]})
+
+        res["onnxruntime"] = _per_step(ort_run, m, repeats=3)
+
+        from parknss.chain.trials import rollout_trials
+
+        sub = tr.__class__(tr.id, tr.maneuver, tr.repetition,
+                           {k: np.asarray(v)[:m] for k, v in tr.channels.items()})
+        res["pytorch"] = _per_step(lambda: rollout_trials(dep.chain, [sub]), m, repeats=2)
+
+    doc = {"chain": a.chain, "steps": n, "us_per_step": res,
+           "real_time_factor": {k: 1e4 / v for k, v in res.items()},
+           "specs": load_chain(a.chain).chain.specs()}
     if a.json:
         print(json.dumps(doc, indent=2))
-    else:
-        print(f"{doc['median_us']:.1f} µs/step median (p10 {doc['p10_us']:.1f}, "
-              f"p90 {doc['p90_us']:.1f}); real-time factor {doc['real_time_factor']:.0f}x; "
-              f"{doc['specs']}")
+        return
+    for k, v in res.items():
+        print(f"{k:15s} {v:9.2f} µs/step   {1e4 / v:9.0f}x real time")
+    print(f"chain {a.chain}: {doc['specs']}")
 
 
 if __name__ == "__main__":

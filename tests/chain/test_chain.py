@@ -25,7 +25,7 @@ from parknss.chain import (
     rollout_trials,
     save_chain,
 )
-from parknss.chain.realtime import NumpyNSS
+from parknss.chain.realtime import NumpyNSS, RealtimeChain
 from parknss.chain.score import make_chain
 from parknss.errors import CheckpointError
 from parknss.plant import Commands, Plant
@@ -50,26 +50,33 @@ def setup(actuator_campaign, actuator_nss):
     return camp, nss, ncfg, env, cmd_models, aware
 
 
-def _step_all(dep: DeployedChain, tr):
+def _step_all(rt: RealtimeChain, tr):
     cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd"))
-    dep.start([tr["vx"][0], tr["yaw_rate"][0]],
-              [tr["torque"][0], tr["brake_pressure"][0], tr["steer"][0]], cm[0])
-    outs = [dep.rt.step(*cm[k]) for k in range(tr.n)]
+    rt.start([tr["vx"][0], tr["yaw_rate"][0]],
+             [tr["torque"][0], tr["brake_pressure"][0], tr["steer"][0]], cm[0])
+    outs = [rt.step(*cm[k]) for k in range(tr.n)]
     st = np.array([o[1] for o in outs])
     act = np.array([o[0] for o in outs])
     return st, act
 
 
+@pytest.mark.parametrize("gear_rule", [False, True], ids=["replay", "gear_rule"])
 @pytest.mark.parametrize("kind", ["command_only", "state_aware"])
-def test_batched_rollout_equals_real_time_step(setup, kind):
+def test_batched_rollout_equals_real_time_step(setup, kind, gear_rule):
+    """The torch rollout (fused/decoupled, its gear-rule fixed point, or the interleaved
+    loop) equals the NumPy real-time step, replaying the logged gear as engaged or gating
+    it as a request; the Plant (DeployedChain) gates it."""
     camp, nss, _, env, cmd_models, aware = setup
     chain = make_chain(nss, cmd_models if kind == "command_only" else aware, env)
     assert chain.state_aware == (kind == "state_aware")
     trials = list(camp)[:3]
-    r = rollout_trials(chain, trials)  # torch: fused (decoupled) or interleaved loop
+    r = rollout_trials(chain, trials, gear_rule=gear_rule)
     dep = DeployedChain(chain)
+    assert dep.rt.shift is not None
+    rt = dep.rt if gear_rule else RealtimeChain(chain.nss, chain.models(), chain.envelope,
+                                                gear_rule=False)
     for i, tr in enumerate(trials):
-        st, act = _step_all(dep, tr)
+        st, act = _step_all(rt, tr)
         n = tr.n
         for j, key in enumerate(("vx", "yaw_rate", "ax", "ay")):
             ref = getattr(r.nss, key)[i, :n].numpy()

@@ -40,6 +40,12 @@ class EnvelopeConfig(StrictModel):
     steer_rate_margin: float = Field(
         1.05, ge=1.0, description="rate limit = margin x the highest steering slew in the data"
     )
+    max_shift_speed_kmh: float = Field(
+        0.1, ge=0.0, description="gear rule: a differing request is refused above, km/h"
+    )
+    shift_time_s: float = Field(
+        0.25, ge=0.0, description="gear rule: standstill time before a new gear engages, s"
+    )
 
 
 class FitConfig(StrictModel):

@@ -10,6 +10,10 @@ Input side, on the commands before the submodels:
 * every command is clamped to its identified domain: decel_cmd to [-0.8, 0] m/s² by
   default (paper), torque_cmd and steer_cmd to the range seen in the data, the latter
   also within the steering lock.
+* the gear obeys the shift-by-wire rule of the reference vehicle (a differing request is
+  engaged only after ``shift_time_s`` at |vx| <= ``shift_speed_kmh``, the drive command
+  zero while it waits): :mod:`parknss.actuators.shift`, applied by the chain, which has
+  the speed it needs.
 
 Output side, on the submodel outputs (never on measured channels): torque and pressure
 are held at their floors (>= 0), the steering angle is rate-limited to just above the
@@ -35,6 +39,7 @@ import torch
 from torch import Tensor
 
 from parknss.actuators.config import EnvelopeConfig
+from parknss.actuators.shift import ShiftByWire
 from parknss.data.trial import Trial
 from parknss.errors import CheckpointError, DataError
 from parknss.signals import DT
@@ -44,7 +49,10 @@ CMD_NAMES: tuple[str, ...] = ("torque_cmd", "decel_cmd", "steer_cmd")
 
 @dataclass(frozen=True)
 class Envelope:
-    """Command domains [lo, hi] per command channel, output floors, lock (deg), rate (deg/s)."""
+    """Command domains [lo, hi] per command channel, output floors, lock (deg), rate (deg/s),
+    and the gear rule: shift speed (km/h) and shift time (s) (:mod:`parknss.actuators.shift`;
+    an artefact written before the rule carries none and gets the reference's 0.1 km/h and
+    0.25 s)."""
 
     cmd_lo: tuple[float, float, float]
     cmd_hi: tuple[float, float, float]
@@ -52,6 +60,8 @@ class Envelope:
     pressure_floor: float = 0.0
     steer_lock: float = 400.0
     steer_rate_dps: float = 1.0e9
+    shift_speed_kmh: float = 0.1
+    shift_time_s: float = 0.25
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -59,13 +69,22 @@ class Envelope:
     @classmethod
     def from_json(cls, d: dict) -> Envelope:
         try:
-            return cls(
+            env = cls(
                 tuple(map(float, d["cmd_lo"])), tuple(map(float, d["cmd_hi"])),
                 float(d["torque_floor"]), float(d["pressure_floor"]),
                 float(d["steer_lock"]), float(d["steer_rate_dps"]),
+                float(d.get("shift_speed_kmh", cls.shift_speed_kmh)),
+                float(d.get("shift_time_s", cls.shift_time_s)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"invalid envelope ({exc})") from exc
+        if not (env.shift_speed_kmh >= 0.0 and env.shift_time_s >= 0.0):
+            raise CheckpointError("invalid envelope (negative or NaN gear-shift rule)")
+        return env
+
+    def shift_rule(self, dt: float = DT) -> ShiftByWire:
+        """A fresh :class:`~parknss.actuators.shift.ShiftByWire` with this envelope's rule."""
+        return ShiftByWire(self.shift_speed_kmh, self.shift_time_s, dt)
 
 
 def identify_envelope(trials: Sequence[Trial], cfg: EnvelopeConfig) -> Envelope:
@@ -85,7 +104,7 @@ def identify_envelope(trials: Sequence[Trial], cfg: EnvelopeConfig) -> Envelope:
     slew = max(float(np.max(np.abs(np.diff(tr["steer"])))) / DT for tr in trials if tr.n > 1)
     return Envelope(
         (t_lo, d_lo, s_lo), (t_hi, d_hi, s_hi), cfg.torque_floor_nm, cfg.pressure_floor_bar,
-        lock, cfg.steer_rate_margin * slew,
+        lock, cfg.steer_rate_margin * slew, cfg.max_shift_speed_kmh, cfg.shift_time_s,
     )
 
 

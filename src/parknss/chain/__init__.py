@@ -3,7 +3,10 @@
 Composition, rollouts and the artefact:
 
 * :mod:`~parknss.chain.model`: :class:`Chain`, the batched differentiable rollout;
-* :mod:`~parknss.chain.realtime`: its NumPy float64 real-time twin;
+* :mod:`~parknss.chain.realtime`: its NumPy float64 real-time twin (the reference
+  implementation of one 10 ms step);
+* :mod:`~parknss.chain.ccode`, :mod:`~parknss.chain.native`: that step as generated C from
+  the weights, compiled and called through ctypes (the FMU's core, ``engine="native"``);
 * :mod:`~parknss.chain.trials`: whole-trial predictions from the logged commands;
 * :mod:`~parknss.chain.artefact`, :mod:`~parknss.chain.deployed`: the artefact folder and
   :class:`DeployedChain`, a :class:`~parknss.plant.Plant`.

@@ -22,20 +22,33 @@ from parknss.chain.model import Chain
 from parknss.chain.realtime import RealtimeChain
 from parknss.chain.trials import Predictions, chain_predictions
 from parknss.data.trial import Trial
+from parknss.errors import ConfigError
 from parknss.plant import Commands, PlantOutput
 
 
 class DeployedChain:
     """A chain ready to drive: ``chain`` (float64, eval), its real-time twin ``rt``, the
     artefact's build metadata ``meta`` and its folder ``path`` (None when built in memory);
-    ``dt`` is the step in s."""
+    ``dt`` is the step in s. ``engine`` "numpy" (default: the NumPy twin, the reference
+    implementation) or "native" (its generated C through ctypes,
+    :class:`~parknss.chain.native.NativeChain`, equal to rounding and faster; needs a C
+    compiler) runs the Plant steps."""
 
-    def __init__(self, chain: Chain, meta: dict | None = None, path: Path | None = None):
+    def __init__(self, chain: Chain, meta: dict | None = None, path: Path | None = None,
+                 engine: str = "numpy"):
         self.chain = chain.double().eval()
         self.meta = meta or {}
         self.path = path
         self.rt = RealtimeChain(self.chain.nss, chain.models(), chain.envelope)
         self.dt = self.rt.dt
+        if engine not in ("numpy", "native"):
+            raise ConfigError(f"chain engine {engine!r}: one of numpy, native")
+        self.engine = engine
+        self.stepper = self.rt
+        if engine == "native":
+            from parknss.chain.native import NativeChain
+
+            self.stepper = NativeChain(self.rt)
         self.reset()
 
     # ------------------------------------------------------------ Plant protocol
@@ -44,26 +57,28 @@ class DeployedChain:
     ) -> PlantOutput:
         """At rest (by default) with the given steering angle; histories hold the rest
         command (torque 0, decel 0, steer_cmd = steer)."""
-        self.rt.start([vx, yaw_rate], [0.0, 0.0, steer], [gear, 0.0, 0.0, steer])
+        self.stepper.start([vx, yaw_rate], [0.0, 0.0, steer], [gear, 0.0, 0.0, steer])
         return PlantOutput(int(gear), 0.0, 0.0, float(steer), float(vx), float(yaw_rate), 0.0, 0.0)
 
     def step(self, cmd: Commands) -> PlantOutput:
-        """One 10 ms sample under ``cmd``: the actuals and states logged at this sample."""
-        act, (vx, yaw, ax, ay) = self.rt.step(
+        """One 10 ms sample under ``cmd``: the engaged gear (the gear rule,
+        :mod:`parknss.actuators.shift`), the actuals and states logged at this sample."""
+        act, (vx, yaw, ax, ay) = self.stepper.step(
             float(cmd.gear), float(cmd.torque_cmd), float(cmd.decel_cmd), float(cmd.steer_cmd)
         )
-        return PlantOutput(int(cmd.gear), act[0], act[1], act[2], vx, yaw, ax, ay)
+        return PlantOutput(int(self.stepper.gear), act[0], act[1], act[2], vx, yaw, ax, ay)
 
     # ------------------------------------------------------- beyond the protocol
     def start(self, x0: Sequence[float], y0: Sequence[float], cmd0: Sequence[float]) -> None:
         """Exact start of a trial replay (not part of the Plant protocol): x0 [vx m/s,
         yaw rad/s], actuals y0 [torque N·m, pressure bar, steer deg], the first command
         cmd0 [gear, torque_cmd, decel_cmd, steer_cmd] filling the histories."""
-        self.rt.start(x0, y0, cmd0)
+        self.stepper.start(x0, y0, cmd0)
 
     @property
     def envelope_activity(self) -> Activity:
-        """How often each envelope acted since the real-time twin was built."""
+        """How often each envelope acted since the real-time twin was built (the NumPy
+        engine counts; the native engine does not)."""
         return self.rt.env.activity
 
     def predict_trials(self, trials: Iterable[Trial]) -> Predictions:
@@ -71,10 +86,11 @@ class DeployedChain:
         return chain_predictions(self.chain, trials)
 
 
-def load_chain(path: str | Path) -> DeployedChain:
-    """Load a chain artefact folder (one-line CheckpointError on any problem)."""
+def load_chain(path: str | Path, engine: str = "numpy") -> DeployedChain:
+    """Load a chain artefact folder (one-line CheckpointError on any problem); ``engine``
+    as for :class:`DeployedChain`."""
     chain, meta, folder = read_chain(path)
-    return DeployedChain(chain, meta, folder)
+    return DeployedChain(chain, meta, folder, engine)
 
 
 def save_chain(folder: str | Path, chain: Chain, meta: dict | None = None) -> Path:

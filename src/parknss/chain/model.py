@@ -14,6 +14,24 @@ physics is not written here: the envelopes are :mod:`parknss.actuators.envelopes
 Euler step and the yaw readout are the NSS's own (:meth:`NSSModel.step_function`,
 :meth:`NSSModel.reconstruct_yaw`).
 
+In closed loop (``rollout(..., gear_rule=True)``, the real-time chain of a Plant, the FMU) the
+gear channel is a request and obeys the shift-by-wire rule (:mod:`parknss.actuators.shift`),
+which reads the chain's own predicted vx. Replaying a log it is not applied (the default):
+the logged gear is the gear the car engaged, already gated by the car's own rule, and the
+chain's vx inside the wheel-speed blind zone (where the loss does not look) cannot resolve
+the rule's 0.1 km/h, so gating it again would delay shifts the car made at rest.
+The rule belongs to the drive train, with the drive submodel:
+a chain whose drive channel is measured feeds the logged gear (the engaged one) and the
+logged torque, which already carry the shifts (Phase B's all-measured reference is the NSS
+on the logged actuals, exactly). With a drive submodel, the interleaved loop applies it
+sample by sample; the decoupled rollout solves it as a fixed point over whole histories
+(roll out with the gears it has, apply the rule to the predicted vx, repeat until the gears
+and shifting flags no longer change). The fixed point is exact, not an approximation:
+gear(k) depends on vx(0..k) only and vx(k) on inputs up to k-1, so every pass settles at
+least one more sample; with no gear change in the commands (or none the rule touches) it
+costs one rollout, and after
+``MAX_SHIFT_PASSES`` passes the interleaved loop (the same rule, sample by sample) finishes.
+
 Initial conditions of a trial rollout: the measured state [vx(0), ω_z(0)] (as for the NSS
 alone), the measured actuals at k = 0 for the lag submodels, the first command filling
 the command histories.
@@ -30,6 +48,7 @@ from torch import Tensor, nn
 
 from parknss.actuators.envelopes import Envelope, clean_commands, limit_outputs_torch
 from parknss.actuators.models import ActuatorModel
+from parknss.actuators.shift import ShiftByWire, engage_history
 from parknss.actuators.spec import CHANNELS, feature_values
 from parknss.errors import DataError
 from parknss.nss.config import NSSConfig
@@ -37,6 +56,7 @@ from parknss.nss.model import I_STEER, NSSModel, Rollout
 from parknss.signals import ACTUAL_CHANNELS
 
 ACTUALS: tuple[str, ...] = ACTUAL_CHANNELS[1:]  # torque, brake_pressure, steer
+MAX_SHIFT_PASSES = 4  # decoupled fixed-point passes before the interleaved loop takes over
 
 
 @dataclass
@@ -114,21 +134,52 @@ class Chain(nn.Module):
         y0: Tensor,
         measured: Tensor | None = None,
         states: tuple[Tensor, Tensor] | None = None,
+        gear_rule: bool = False,
     ) -> ChainRollout:
         """Batched rollout. cmds (B, T, 4) [gear, torque_cmd, decel_cmd, steer_cmd];
         x0 (B, 2) [vx, yaw]; y0 (B, 3) actuals at k = 0; measured (B, T, 3) logged actuals
         (needed for channels without a submodel). ``states`` (vx, yaw), each (B, T), feeds
         state-aware submodels fixed states instead of the NSS's (the co-tuning surrogate);
-        the rollout is then decoupled."""
+        the rollout is then decoupled. ``gear_rule``: the gear column is a request that the
+        shift-by-wire rule gates (closed loop); False (default): it is the engaged gear of a
+        log, which already carries the car's own gating (module doc)."""
         c_np = np.asarray(cmds.detach() if isinstance(cmds, Tensor) else cmds, np.float64)
         y0 = torch.as_tensor(y0, dtype=torch.float64)
         c = torch.as_tensor(clean_commands(self.envelope, c_np, y0[:, 2].numpy()))
         if len(self.acts) < len(CHANNELS) and measured is None:
             raise DataError("a chain with measured channels needs the measured actuals")
         x0 = torch.as_tensor(x0, dtype=torch.float64)
+        rule = gear_rule and self.model("drive") is not None
         if self.state_aware and states is None:
-            return self._interleaved(c, x0, y0, measured)
-        return self._decoupled(c, x0, y0, measured, states)
+            return self._interleaved(c, x0, y0, measured, rule)
+        if not rule:  # the engaged gear (a log), or a measured drive channel: no rule
+            return self._decoupled(c, x0, y0, measured, states)
+        return self._shifted(c, x0, y0, measured, states)
+
+    def _rules(self, c: Tensor) -> list[ShiftByWire]:
+        """One gear rule per row, engaged in the row's first (clean) gear."""
+        rules = []
+        for g0 in c[:, 0, 0].tolist():
+            r = self.envelope.shift_rule()
+            r.reset(g0)
+            rules.append(r)
+        return rules
+
+    def _shifted(self, c, x0, y0, measured, states=None) -> ChainRollout:
+        """The decoupled rollout under the gear rule: the fixed point of the module doc."""
+        requests = c[..., 0].numpy()
+        gears, shifting = requests, np.zeros(requests.shape, dtype=bool)
+        for _ in range(MAX_SHIFT_PASSES):
+            cc = c.clone()
+            cc[..., 0] = torch.as_tensor(gears)
+            cc[..., 1] = torch.where(torch.as_tensor(shifting), 0.0, cc[..., 1])
+            r = self._decoupled(cc, x0, y0, measured, states)
+            vx = states[0] if states is not None else r.nss.vx
+            g2, s2 = engage_history(self._rules(c), requests, vx.detach().double().numpy())
+            if np.array_equal(g2, gears) and np.array_equal(s2, shifting):
+                return r
+            gears, shifting = g2, s2
+        return self._interleaved(c, x0, y0, measured, True)
 
     def _decoupled(self, c, x0, y0, measured, states=None) -> ChainRollout:
         """Every submodel over the whole history, the output envelope, then the NSS."""
@@ -148,7 +199,7 @@ class Chain(nn.Module):
         u = torch.stack([c[..., 0], *ys], dim=-1)
         return ChainRollout(u[..., 1:], self.nss.rollout(x0, u))
 
-    def _interleaved(self, c, x0, y0, measured) -> ChainRollout:
+    def _interleaved(self, c, x0, y0, measured, rule: bool = False) -> ChainRollout:
         """Sample by sample: submodels read the NSS state x̂(k), the NSS advances on u(k)."""
         nss = self.nss
         integrate = nss.step_function()
@@ -161,10 +212,17 @@ class Chain(nn.Module):
         }
         vx, yaw = x0[:, 0], x0[:, 1]
         steer_prev = y0[:, 2]
+        rules = self._rules(c) if rule else []
         x = None
         Xs, Us = [], []
         for k in range(c.shape[1]):
-            g = c[:, k, 0]
+            g, cmds = c[:, k, 0], (c[:, k, 1], c[:, k, 2], c[:, k, 3])
+            if rules:
+                req, v_now = c[:, k, 0].tolist(), vx.detach().tolist()
+                g = torch.tensor([r.step(q, v) for r, q, v in zip(rules, req, v_now, strict=True)],
+                                 dtype=c.dtype)
+                hold = torch.tensor([r.shifting for r in rules])
+                cmds = (torch.where(hold, 0.0, cmds[0]), *cmds[1:])
             ys = []
             for i, ch in enumerate(CHANNELS):
                 m = self.model(ch)
@@ -172,7 +230,7 @@ class Chain(nn.Module):
                     ys.append(measured[:, k, i])
                     continue
                 f = torch_features(m.spec.features, vx, yaw, g) if m.spec.state_aware else None
-                y, states[ch] = m.step(states[ch], c[:, k, 1 + i], f)
+                y, states[ch] = m.step(states[ch], cmds[i], f)
                 ys.append(y)
             ys = limit_outputs_torch(self.envelope, *ys, steer_prev, modelled)
             steer_prev = ys[2]

@@ -2,7 +2,8 @@
 
 :class:`NumpyNSS` is the NSS vehicle model's forward-Euler step and readout in NumPy
 (weights copied once in float64); :class:`RealtimeChain` strings the input envelope, the
-three actuator steppers (:mod:`parknss.actuators.steppers`), the output envelope
+gear rule (:mod:`parknss.actuators.shift`), the three actuator steppers
+(:mod:`parknss.actuators.steppers`), the output envelope
 (:class:`parknss.actuators.envelopes.EnvelopeState`) and the NSS together with exactly the
 arithmetic of :meth:`parknss.chain.model.Chain.rollout`, so the two agree to rounding over
 whole trials (tests/chain/test_chain.py asserts 1e-10 in float64). :class:`NumpyNSS` is tested
@@ -10,7 +11,10 @@ on its own against :meth:`parknss.nss.model.NSSModel.step`, the one source of th
 Euler step and yaw readout (tests/chain/test_chain.py).
 
 Timing of one call ``step(gear, torque_cmd, decel_cmd, steer_cmd)`` at sample k: the
-features of sample k are read from the NSS state x̂(k); the submodels give the actuals
+features of sample k are read from the NSS state x̂(k), and so is the vx of the gear rule
+(the engaged gear of sample k; the drive command is 0 while a shift waits; a chain with
+a measured drive channel takes the gear as given, see :mod:`parknss.chain.model`); the submodels
+give the actuals
 u(k); the outputs of sample k are the readout at (x̂(k), u(k)); the state advances to
 x̂(k+1) = x̂(k) + dt·f(x̂(k), u(k)). This is the alignment of the logs (a command and the
 state logged at the same sample), so ``step`` reproduces the batched rollout sample by
@@ -111,15 +115,25 @@ class NumpyNSS:
 
 
 class RealtimeChain:
-    """Envelopes -> steppers -> NSS, one sample per call (see the module doc)."""
+    """Envelopes -> steppers -> NSS, one sample per call (see the module doc). ``gear_rule``
+    (default True: a Plant's gear is a request) gates the gear by the shift-by-wire rule;
+    False replays a log's engaged gear as given (:mod:`parknss.chain.model`)."""
 
     def __init__(
-        self, nss_model: NSSModel, models: dict[str, ActuatorModel | None], envelope: Envelope
+        self,
+        nss_model: NSSModel,
+        models: dict[str, ActuatorModel | None],
+        envelope: Envelope,
+        gear_rule: bool = True,
     ) -> None:
         self.nss = NumpyNSS(nss_model)
         self.specs = {c: (m.spec if m is not None else None) for c, m in models.items()}
         self.steppers = {c: (m.stepper() if m is not None else None) for c, m in models.items()}
         self.env = EnvelopeState(envelope)
+        # the gear rule gates a requested gear (closed loop); a replayed log's gear is engaged
+        self.shift = (envelope.shift_rule() if gear_rule and models.get("drive") is not None
+                      else None)
+        self.gear = 0.0  # the engaged gear of the last sample
         self.dt = self.nss.dt
         self.full = all(m is not None for m in models.values())
 
@@ -134,10 +148,15 @@ class RealtimeChain:
 
     def start(self, x0, y0, cmd0) -> None:
         """Initial state: x0 [vx, yaw], actuals y0 [torque, pressure, steer], command cmd0
-        [gear, torque_cmd, decel_cmd, steer_cmd] that fills the histories."""
-        self.env.reset(steer=float(y0[2]), gear=float(cmd0[0]))
-        g, c = self.env.command(float(cmd0[0]), [float(v) for v in cmd0[1:]])
+        [gear, torque_cmd, decel_cmd, steer_cmd] that fills the histories; its gear (NaN: 0,
+        as :func:`~parknss.actuators.envelopes.clean_commands` fills it) is engaged."""
+        g0 = float(cmd0[0]) if math.isfinite(float(cmd0[0])) else 0.0
+        self.env.reset(steer=float(y0[2]), gear=g0)
+        g, c = self.env.command(g0, [float(v) for v in cmd0[1:]])
         self.env.reset(steer=float(y0[2]), gear=g)
+        if self.shift is not None:
+            self.shift.reset(g)
+        self.gear = g
         for i, ch in enumerate(CHANNELS):
             s = self.steppers[ch]
             if s is not None:
@@ -153,8 +172,14 @@ class RealtimeChain:
     ):
         """One sample: returns (actuals (3,), (vx, yaw, ax, ay)). ``measured`` (3,) supplies
         the actuals of channels without a submodel (Phase B substitution)."""
-        g, c = self.env.command(gear, [torque_cmd, decel_cmd, steer_cmd])
+        request, c = self.env.command(gear, [torque_cmd, decel_cmd, steer_cmd])
         vx, yaw = self.vx_now, self.yaw_prev
+        g = request
+        if self.shift is not None:
+            g = self.shift.step(request, vx)
+            if self.shift.shifting:
+                c[0] = 0.0
+        self.gear = g
         ys = []
         for i, ch in enumerate(CHANNELS):
             spec = self.specs[ch]

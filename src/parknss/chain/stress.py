@@ -100,7 +100,8 @@ def run_stress(
             sts.append(s)
         act, st = np.array(acts), np.array(sts)
         with torch.no_grad():
-            r = deployed.chain.rollout(cmds[None], torch.tensor([x0]), torch.tensor([y0]))
+            r = deployed.chain.rollout(cmds[None], torch.tensor([x0]), torch.tensor([y0]),
+                                       gear_rule=deployed.rt.shift is not None)
         diff = float(np.max(np.abs(r.nss.vx[0].numpy() - st[:, 0])))
         rate = np.abs(np.diff(np.r_[y0[2], act[:, 2]])) / DT
         viol = int(np.sum(act[:, 0] < env.torque_floor) + np.sum(act[:, 1] < env.pressure_floor)

@@ -56,18 +56,22 @@ def trial_batch(trials: Sequence[Trial]) -> TrialBatch:
                       [tr.id for tr in trials])
 
 
-def rollout_trials(chain: Chain, trials: Sequence[Trial]) -> ChainRollout:
-    """No-grad chain rollout of whole trials (padded); see :func:`trial_batch`."""
+def rollout_trials(
+    chain: Chain, trials: Sequence[Trial], gear_rule: bool = False
+) -> ChainRollout:
+    """No-grad chain rollout of whole trials (padded); see :func:`trial_batch`. A replay:
+    the logged gear is engaged as given unless ``gear_rule`` (:meth:`Chain.rollout`)."""
     b = trial_batch(trials)
     with torch.no_grad():
         return chain.rollout(b.cmds, torch.as_tensor(b.x0), torch.as_tensor(b.y0),
-                             torch.as_tensor(b.actuals))
+                             torch.as_tensor(b.actuals), gear_rule=gear_rule)
 
 
 def realtime_predictions(chain: Chain, trials: Iterable[Trial]) -> Predictions:
     """The same predictions by the NumPy real-time twin, trial by trial (faster than the
-    torch loop when state-aware submodels force an interleaved rollout)."""
-    rt = RealtimeChain(chain.nss, chain.models(), chain.envelope)
+    torch loop when state-aware submodels force an interleaved rollout). A replay: the
+    logged gear is the engaged one, no gear rule (:mod:`parknss.chain.model`)."""
+    rt = RealtimeChain(chain.nss, chain.models(), chain.envelope, gear_rule=False)
     out: Predictions = {}
     names = ("vx", "yaw_rate", "ax", "ay", *ACTUALS)
     for tr in trials:

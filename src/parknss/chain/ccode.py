@@ -1,0 +1,475 @@
+"""The chain's 10 ms step as generated C source: the weights of one chain, no Python at run
+time.
+
+:func:`chain_c_source` writes a :class:`~parknss.chain.realtime.RealtimeChain` (the NumPy
+float64 twin, the reference implementation) as two C99 files, ``pk_chain.h`` and
+``pk_chain.c``: every weight and scaling a ``static const double`` literal (``repr``, so
+the doubles round-trip exactly), and the twin's arithmetic statement for statement: the
+input envelope (NaN hold, ±inf and domain clamps), the gear rule
+(:mod:`parknss.actuators.shift`), the three steppers (static, lag1, Hammerstein, lag2,
+NARX, GRU, LSTM; state-aware features), the output envelope (floors, steering rate limit,
+lock) and the NSS's Euler step and readout. Only the order of the sums inside a
+matrix-vector product differs from NumPy's BLAS, so the two agree to rounding over whole
+trials (tests/chain/test_ccode.py; the FMU test holds it at 1e-9).
+
+The C interface (``pk_chain.h``)::
+
+    size_t pk_size(void);                                    bytes of one pk_chain
+    void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double cmd0[4]);
+    void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]);
+    void pk_run(pk_chain *s, const double *cmds, long n, double *out);   n samples
+
+``cmd`` is [gear, torque_cmd N·m, decel_cmd m/s², steer_cmd deg]; ``out`` is
+[torque N·m, brake_pressure bar, steer deg, vx m/s, yaw_rate rad/s, ax m/s², ay m/s²,
+engaged gear] (:data:`OUTPUTS`); ``pk_start`` is :meth:`RealtimeChain.start`.
+Matrix-vector products loop over the input outer and the output inner, with the weights
+stored transposed, so the compiler vectorises them without reassociating a sum.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from parknss.actuators.spec import CHANNELS
+from parknss.actuators.steppers import (
+    GRUStepper,
+    Lag1Stepper,
+    Lag2Stepper,
+    LSTMStepper,
+    NARXStepper,
+    StaticStepper,
+    Stepper,
+)
+from parknss.chain.realtime import RealtimeChain
+from parknss.errors import CheckpointError
+from parknss.nss.nets import NumpyLayers
+from parknss.signals import DT
+
+OUTPUTS: tuple[str, ...] = (
+    "torque", "brake_pressure", "steer", "vx", "yaw_rate", "ax", "ay", "gear",
+)
+HEADER = "pk_chain.h"
+SOURCE = "pk_chain.c"
+
+
+@dataclass(frozen=True)
+class CSource:
+    """The generated files: ``header`` (pk_chain.h) and ``source`` (pk_chain.c) text."""
+
+    header: str
+    source: str
+
+    def files(self) -> dict[str, str]:
+        return {HEADER: self.header, SOURCE: self.source}
+
+
+def _num(v: float) -> str:
+    v = float(v)
+    if math.isinf(v):
+        return "HUGE_VAL" if v > 0 else "(-HUGE_VAL)"
+    if math.isnan(v):
+        raise CheckpointError("chain holds a NaN weight or scaling; cannot generate C")
+    return repr(v)
+
+
+def _array(name: str, values) -> str:
+    flat = np.asarray(values, dtype=np.float64).ravel().tolist()
+    if not flat:
+        return f"static const double {name}[1] = {{0.0}};\n"
+    body = ",".join(_num(v) for v in flat)
+    return f"static const double {name}[{len(flat)}] = {{{body}}};\n"
+
+
+class _Writer:
+    """Collects the weight literals and the code of one chain."""
+
+    def __init__(self) -> None:
+        self.data: list[str] = []
+        self.max_width = 8
+
+    def mlp(self, name: str, layers: NumpyLayers) -> str:
+        """Emit the layers (W transposed) and a pk_layer table; return the table's name."""
+        rows = []
+        for i, (W, b) in enumerate(layers):
+            self.data.append(_array(f"{name}_W{i}", W.T))
+            self.data.append(_array(f"{name}_B{i}", b))
+            rows.append(f"{{{W.shape[1]}, {W.shape[0]}, {name}_W{i}, {name}_B{i}}}")
+            self.max_width = max(self.max_width, W.shape[0], W.shape[1])
+        self.data.append(f"static const pk_layer {name}[{len(layers)}] = {{{', '.join(rows)}}};\n")
+        return name
+
+    def vec(self, name: str, values) -> str:
+        self.data.append(_array(name, values))
+        return name
+
+
+def _features(ch: str, st: Stepper, spec_features: tuple[str, ...]) -> str:
+    """C statements filling ``fs`` (scaled features) from vx, yaw, g."""
+    if not spec_features:
+        return ""
+    src = {"speed": "fabs(vx)", "vx": "vx", "yaw_rate": "yaw", "gear": "g"}
+    lines = [f"    fs[{i}] = ({src[n]} - {_num(st.f_off[i])}) / {_num(st.f_sc[i])};"
+             for i, n in enumerate(spec_features)]
+    return "\n".join(lines) + "\n"
+
+
+def _dot(a: str, b: str, n: int) -> str:
+    """A left-to-right sum of n products as one C expression (0.0 when n = 0)."""
+    if n == 0:
+        return "0.0"
+    terms = [f"{a}[{i}] * {b}[{i}]" for i in range(n)]
+    return "(" + " + ".join(terms) + ")"
+
+
+def _target(ch: str, st: StaticStepper, w: _Writer) -> str:
+    """C expression of the affine target k·cs + b (+ f·w) of a lag-family stepper."""
+    t = f"({_num(st.k)} * cs + {_num(st.b)})"
+    if st.n_feat:
+        wn = w.vec(f"{ch}_w", st.w)
+        t = f"({t} + {_dot('fs', wn, st.n_feat)})"
+    return t
+
+
+def _stepper(ch: str, st: Stepper, feats: tuple[str, ...], w: _Writer) -> tuple[str, str]:
+    """(reset body, step body) of one channel's stepper; state lives in s->{ch}."""
+    cs = f"    double cs = (c - {_num(st.c_off)}) / {_num(st.c_sc)};\n"
+    fs = f"    double fs[{max(st.n_feat, 1)}];\n" + _features(ch, st, feats)
+    ys, yo = _num(st.y_sc), _num(st.y_off)
+    if isinstance(st, Lag1Stepper):
+        lt = _num(st.log_tau)
+        if st.n_feat:
+            vn = w.vec(f"{ch}_v", st.v)
+            lt = f"{lt} + {_dot('fs', vn, st.n_feat)}"
+        else:
+            lt = f"{lt} + 0.0"
+        psi = ""
+        if st.psi is not None:
+            tab = w.mlp(f"{ch}_psi", st.psi)
+            zin = ", ".join(["cs", *[f"fs[{i}]" for i in range(st.n_feat)]])
+            psi = (f"    double z[{1 + st.n_feat}] = {{{zin}}}, o[1];\n"
+                   f"    pk_mlp({tab}, {len(st.psi)}, z, o);\n    u = u + o[0];\n")
+        step = (cs + fs + f"    double lt = {lt};\n"
+                f"    double a = exp(-{_num(st.dt)} * exp(-lt));\n"
+                f"    double u = {_target(ch, st, w)};\n" + psi +
+                f"    double out = s->{ch}.y * {ys} + {yo};\n"
+                f"    s->{ch}.y = a * s->{ch}.y + (1.0 - a) * u;\n    return out;\n")
+        return f"    s->{ch}.y = (y0 - {yo}) / {ys};\n", step
+    if isinstance(st, Lag2Stepper):
+        (a00, a01), (a10, a11) = st.A
+        b0, b1 = st.Bv
+        step = (cs + fs + f"    double t = {_target(ch, st, w)};\n"
+                f"    double p = s->{ch}.pos, r = s->{ch}.rate;\n"
+                f"    double out = p * {ys} + {yo};\n"
+                f"    s->{ch}.pos = {_num(a00)} * p + {_num(a01)} * r + {_num(b0)} * t;\n"
+                f"    s->{ch}.rate = {_num(a10)} * p + {_num(a11)} * r + {_num(b1)} * t;\n"
+                "    return out;\n")
+        return f"    s->{ch}.pos = (y0 - {yo}) / {ys};\n    s->{ch}.rate = 0.0;\n", step
+    if isinstance(st, StaticStepper):
+        step = cs + fs + f"    return {_target(ch, st, w)} * {ys} + {yo};\n"
+        return "    (void)y0;\n", step
+    if isinstance(st, NARXStepper):
+        n, nf = st.n, st.n_feat
+        tab = w.mlp(f"{ch}_net", st.net)
+        sw = w.vec(f"{ch}_skip", st.skip_w)
+        reset = (f"    for (int i = 0; i < {2 * n}; ++i) s->{ch}.buf[i] = "
+                 f"(c0 - {_num(st.c_off)}) / {_num(st.c_sc)};\n    s->{ch}.i = 0;\n")
+        step = (cs + fs + f"    int i = s->{ch}.i;\n"
+                f"    s->{ch}.buf[i] = s->{ch}.buf[i + {n}] = cs;\n"
+                f"    i = s->{ch}.i = (i + 1) % {n};\n"
+                f"    double z[{n + nf}], o[1], sk = 0.0;\n"
+                f"    for (int j = 0; j < {n}; ++j) z[j] = s->{ch}.buf[i + j];\n"
+                f"    for (int j = 0; j < {nf}; ++j) z[{n} + j] = fs[j];\n"
+                f"    pk_mlp({tab}, {len(st.net)}, z, o);\n"
+                f"    for (int j = 0; j < {n + nf}; ++j) sk += {sw}[j] * z[j];\n"
+                f"    return (o[0] + sk + {_num(st.skip_b)}) * {ys} + {yo};\n")
+        return reset, step
+    if isinstance(st, GRUStepper):
+        H, nf = st.H, st.n_feat
+        lstm = isinstance(st, LSTMStepper)
+        wi, bi = w.vec(f"{ch}_Wi", st.Wi.T), w.vec(f"{ch}_bi", st.bi)
+        wh, bh = w.vec(f"{ch}_Wh", st.Wh.T), w.vec(f"{ch}_bh", st.bh)
+        wo = w.vec(f"{ch}_Wo", st.Wo)
+        G = (4 if lstm else 3) * H
+        head = (cs + fs + f"    double x[{1 + nf}], gi[{G}], gh[{G}], y = 0.0;\n"
+                f"    x[0] = cs;\n    for (int j = 0; j < {nf}; ++j) x[1 + j] = fs[j];\n"
+                f"    pk_matvec({wi}, {1 + nf}, {G}, x, gi);\n"
+                f"    pk_matvec({wh}, {H}, {G}, s->{ch}.h, gh);\n"
+                f"    for (int j = 0; j < {G}; ++j) {{ gi[j] += {bi}[j]; gh[j] += {bh}[j]; }}\n")
+        if lstm:
+            body = (f"    for (int j = 0; j < {H}; ++j) {{\n"
+                    f"        double gj[4];\n"
+                    f"        for (int q = 0; q < 4; ++q)\n"
+                    f"            gj[q] = gi[q * {H} + j] + gh[q * {H} + j];\n"
+                    "        double ig = pk_sigmoid(gj[0]), fg = pk_sigmoid(gj[1]);\n"
+                    "        double gg = tanh(gj[2]), og = pk_sigmoid(gj[3]);\n"
+                    f"        s->{ch}.c[j] = fg * s->{ch}.c[j] + ig * gg;\n"
+                    f"        s->{ch}.h[j] = og * tanh(s->{ch}.c[j]);\n    }}\n")
+            reset = (f"    for (int j = 0; j < {H}; ++j) s->{ch}.h[j] = s->{ch}.c[j] = 0.0;\n"
+                     "    (void)y0;\n")
+        else:
+            body = (f"    for (int j = 0; j < {H}; ++j) {{\n"
+                    f"        double r = pk_sigmoid(gi[j] + gh[j]);\n"
+                    f"        double z = pk_sigmoid(gi[{H} + j] + gh[{H} + j]);\n"
+                    f"        double n = tanh(gi[{2 * H} + j] + r * gh[{2 * H} + j]);\n"
+                    f"        s->{ch}.h[j] = (1.0 - z) * n + z * s->{ch}.h[j];\n    }}\n")
+            reset = f"    for (int j = 0; j < {H}; ++j) s->{ch}.h[j] = 0.0;\n    (void)y0;\n"
+        tail = (f"    for (int j = 0; j < {H}; ++j) y += {wo}[j] * s->{ch}.h[j];\n"
+                f"    return (y + {_num(st.bo)}) * {ys} + {yo};\n")
+        return reset, head + body + tail
+    raise CheckpointError(f"no C template for the {type(st).__name__} stepper")
+
+
+def _state_struct(rt: RealtimeChain) -> str:
+    """The per-channel state fields of pk_chain."""
+    fields = []
+    for ch in CHANNELS:
+        st = rt.steppers[ch]
+        f = ["double y", "double pos", "double rate"]
+        if isinstance(st, NARXStepper):
+            f += [f"double buf[{2 * st.n}]", "int i"]
+        if isinstance(st, GRUStepper):
+            f += [f"double h[{st.H}]", f"double c[{st.H}]"]
+        fields.append("    struct { " + "; ".join(f) + f"; }} {ch};")
+    return "\n".join(fields)
+
+
+_RUNTIME = r"""
+static double pk_sigmoid(double x) { return 1.0 / (1.0 + exp(-x)); }
+
+/* y (n_out) = W x with W stored transposed (n_in, n_out); the sum over the input in
+   order, the output loop inner (vectorised without reassociation). */
+static void pk_matvec(const double *wt, int n_in, int n_out, const double *x, double *y) {
+    for (int j = 0; j < n_out; ++j) y[j] = 0.0;
+    for (int i = 0; i < n_in; ++i) {
+        const double xi = x[i];
+        const double *w = wt + (long)i * n_out;
+        for (int j = 0; j < n_out; ++j) y[j] += w[j] * xi;
+    }
+}
+
+/* The tanh perceptron: tanh(W h + b) per hidden layer, a linear head. */
+static void pk_mlp(const pk_layer *L, int n, const double *z, double *out) {
+    double a[PK_MAXW], b[PK_MAXW];
+    const double *h = z;
+    for (int l = 0; l < n; ++l) {
+        double *y = (l == n - 1) ? out : ((l % 2) ? b : a);
+        pk_matvec(L[l].wt, L[l].n_in, L[l].n_out, h, y);
+        for (int j = 0; j < L[l].n_out; ++j) y[j] += L[l].b[j];
+        if (l < n - 1)
+            for (int j = 0; j < L[l].n_out; ++j) y[j] = tanh(y[j]);
+        h = y;
+    }
+}
+"""
+
+
+def chain_c_source(rt: RealtimeChain, name: str = "parknss chain") -> CSource:
+    """The C files of ``rt`` (a full chain: every channel modelled); see the module doc."""
+    if not rt.full:
+        raise CheckpointError("C generation needs a chain with all three submodels")
+    nss, env = rt.nss, rt.env.env
+    w = _Writer()
+    st_tab, out_tab = w.mlp("NSS_F", nss.state), w.mlp("NSS_G", nss.output)
+    funcs = []
+    for ch in CHANNELS:
+        reset, step = _stepper(ch, rt.steppers[ch], rt.specs[ch].features, w)
+        funcs.append(f"static void {ch}_reset(pk_chain *s, double c0, double y0) {{\n"
+                     f"    (void)c0; (void)y0;\n{reset}}}\n"
+                     f"static double {ch}_step(pk_chain *s, double c, double vx, double yaw, "
+                     f"double g) {{\n    (void)vx; (void)yaw; (void)g;\n{step}}}\n")
+    rule = rt.shift
+    consts = {
+        "DT": DT, "NSS_DT": nss.dt, "WHEELBASE": nss.L, "RATIO": nss.ratio,
+        "DEG2RAD": math.pi / 180.0,
+        "STEER_STEP": env.steer_rate_dps * DT, "STEER_LOCK": env.steer_lock,
+        "TORQUE_FLOOR": env.torque_floor, "PRESSURE_FLOOR": env.pressure_floor,
+        "SHIFT_SPEED": rule.max_speed if rule else math.inf,
+    }
+    vecs = {
+        "CMD_LO": env.cmd_lo, "CMD_HI": env.cmd_hi, "IN_OFF": nss.in_off, "IN_SC": nss.in_sc,
+        "IN_LO": nss.in_lo, "IN_HI": nss.in_hi, "ST_OFF": nss.st_off, "ST_SC": nss.st_sc,
+        "ST_LO": nss.st_lo, "ST_HI": nss.st_hi, "OUT_OFF": nss.out_off, "OUT_SC": nss.out_sc,
+    }
+    for k, v in vecs.items():
+        w.vec(k, v)
+    header = _HEADER.format(name=name, nout=len(OUTPUTS), fields=_state_struct(rt))
+    body = "".join(f"static const double {k} = {_num(v)};\n" for k, v in consts.items())
+    source = _SOURCE.format(
+        name=name, maxw=w.max_width, consts=body, data="".join(w.data), runtime=_RUNTIME,
+        funcs="\n".join(funcs), st_tab=st_tab, n_st=len(nss.state), out_tab=out_tab,
+        n_out=len(nss.output), residual=int(nss.residual), shift=int(rule is not None),
+        n_shift=rule.n_shift if rule else 0,
+    )
+    return CSource(header, source)
+
+
+_HEADER = """/* {name}: the chain's 10 ms step, generated by parknss (parknss.chain.ccode). */
+#ifndef PK_CHAIN_H
+#define PK_CHAIN_H
+#include <stddef.h>
+#define PK_NOUT {nout}
+
+typedef struct {{
+    double last[3], gear_req, steer_prev;   /* input and output envelopes */
+    double gear; int shifting, count;       /* the gear rule */
+    long refused, waited, shifts;
+    double x0[2], x[2], vx_now, yaw_prev;   /* the NSS */
+    int started;
+{fields}
+}} pk_chain;
+
+size_t pk_size(void);
+void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double cmd0[4]);
+void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]);
+void pk_run(pk_chain *s, const double *cmds, long n, double *out);
+#endif
+"""
+
+_SOURCE = """/* {name}: the chain's 10 ms step, generated by parknss (parknss.chain.ccode).
+   Weights and scalings are the artefact's, as exact double literals. Do not edit. */
+#include <math.h>
+#include <string.h>
+#include "pk_chain.h"
+
+#define PK_MAXW {maxw}
+typedef struct {{ int n_in, n_out; const double *wt, *b; }} pk_layer;
+
+{consts}
+{data}
+{runtime}
+/* ---------------------------------------------------------------- the envelopes */
+static double pk_command(pk_chain *s, double gear, const double *in, double *c) {{
+    if (isfinite(gear)) s->gear_req = gear;
+    for (int i = 0; i < 3; ++i) {{
+        double v = in[i];
+        if (isnan(v)) v = s->last[i];
+        if (v < CMD_LO[i] || v > CMD_HI[i]) v = v < CMD_LO[i] ? CMD_LO[i] : CMD_HI[i];
+        s->last[i] = v;
+        c[i] = v;
+    }}
+    return s->gear_req;
+}}
+
+static void pk_output(pk_chain *s, double *y) {{
+    if (y[0] < TORQUE_FLOOR) y[0] = TORQUE_FLOOR;
+    if (y[1] < PRESSURE_FLOOR) y[1] = PRESSURE_FLOOR;
+    double lo = s->steer_prev - STEER_STEP, hi = s->steer_prev + STEER_STEP, st = y[2];
+    if (st < lo || st > hi) st = st < lo ? lo : hi;
+    if (fabs(st) > STEER_LOCK) st = copysign(STEER_LOCK, st);
+    s->steer_prev = st;
+    y[2] = st;
+}}
+
+static void pk_env_reset(pk_chain *s, double steer, double gear) {{
+    s->last[0] = 0.0; s->last[1] = 0.0; s->last[2] = steer;
+    s->gear_req = gear;
+    s->steer_prev = steer;
+}}
+
+/* ---------------------------------------------------------------- the gear rule */
+static double pk_shift(pk_chain *s, double request, double vx) {{
+    if (!{shift}) return request;
+    if (request == s->gear) {{ s->shifting = 0; s->count = 0; }}
+    else if (fabs(vx) > SHIFT_SPEED) {{ s->shifting = 0; s->count = 0; s->refused += 1; }}
+    else {{
+        s->shifting = 1; s->waited += 1; s->count += 1;
+        if (s->count >= {n_shift}) {{ s->gear = request; s->shifting = 0; s->count = 0;
+                                       s->shifts += 1; }}
+    }}
+    return s->gear;
+}}
+
+/* ---------------------------------------------------------------- the submodels */
+{funcs}
+/* ---------------------------------------------------------------- the NSS */
+static void pk_scale_u(const double *u, double *us) {{
+    for (int i = 0; i < 4; ++i) {{
+        double v = u[i] < IN_LO[i] ? IN_LO[i] : u[i];
+        v = v > IN_HI[i] ? IN_HI[i] : v;
+        us[i] = (v - IN_OFF[i]) / IN_SC[i];
+    }}
+}}
+
+static double pk_yaw_ref(double vx_s, double steer_s) {{
+    double vx = vx_s * ST_SC[0] + ST_OFF[0];
+    double steer = steer_s * IN_SC[3] + IN_OFF[3];
+    return vx / WHEELBASE * tan(steer / RATIO * DEG2RAD);
+}}
+
+/* (scaled reconstructed yaw, physical yaw) at state x and scaled steering */
+static double pk_yaw(const double *x, double steer_s, double *phys) {{
+    double ys = x[1];
+    if ({residual}) ys = (pk_yaw_ref(x[0], steer_s) - ST_OFF[1]) / ST_SC[1] + x[1];
+    *phys = ys * ST_SC[1] + ST_OFF[1];
+    return ys;
+}}
+
+static void pk_initial(pk_chain *s, const double *us) {{
+    double x0s[2];
+    for (int i = 0; i < 2; ++i) {{
+        double v = s->x0[i] > ST_LO[i] ? s->x0[i] : ST_LO[i];
+        v = v < ST_HI[i] ? v : ST_HI[i];
+        x0s[i] = (v - ST_OFF[i]) / ST_SC[i];
+    }}
+    s->x[0] = x0s[0];
+    s->x[1] = x0s[1];
+    if ({residual}) s->x[1] = x0s[1] - (pk_yaw_ref(x0s[0], us[3]) - ST_OFF[1]) / ST_SC[1];
+}}
+
+/* ---------------------------------------------------------------- the interface */
+size_t pk_size(void) {{ return sizeof(pk_chain); }}
+
+void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double cmd0[4]) {{
+    memset(s, 0, sizeof(*s));
+    double c[3], g0 = isfinite(cmd0[0]) ? cmd0[0] : 0.0;
+    pk_env_reset(s, y0[2], g0);
+    double g = pk_command(s, g0, cmd0 + 1, c);
+    pk_env_reset(s, y0[2], g);
+    s->gear = g;
+    drive_reset(s, c[0], y0[0]);
+    brake_reset(s, c[1], y0[1]);
+    steering_reset(s, c[2], y0[2]);
+    s->x0[0] = x0[0]; s->x0[1] = x0[1];
+    s->started = 0;
+    s->yaw_prev = x0[1];
+    s->vx_now = x0[0];
+}}
+
+void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
+    double c[3], y[3], u[4], us[4], z[6], h[5], o[2], f[2];
+    double request = pk_command(s, cmd[0], cmd + 1, c);
+    double vx = s->vx_now, yaw = s->yaw_prev;
+    double g = pk_shift(s, request, vx);
+    if ({shift} && s->shifting) c[0] = 0.0;
+    y[0] = drive_step(s, c[0], vx, yaw, g);
+    y[1] = brake_step(s, c[1], vx, yaw, g);
+    y[2] = steering_step(s, c[2], vx, yaw, g);
+    pk_output(s, y);
+    u[0] = g; u[1] = y[0]; u[2] = y[1]; u[3] = y[2];
+    pk_scale_u(u, us);
+    if (!s->started) {{ pk_initial(s, us); s->started = 1; }}
+    double yaw_phys, ys = pk_yaw(s->x, us[3], &yaw_phys);
+    h[0] = s->x[0]; h[1] = ys; h[2] = us[1]; h[3] = us[2]; h[4] = us[3];
+    pk_mlp({out_tab}, {n_out}, h, o);
+    out[0] = y[0]; out[1] = y[1]; out[2] = y[2];
+    out[3] = s->x[0] * ST_SC[0] + ST_OFF[0];
+    out[4] = yaw_phys;
+    out[5] = o[0] * OUT_SC[0] + OUT_OFF[0];
+    out[6] = o[1] * OUT_SC[1] + OUT_OFF[1];
+    out[7] = g;
+    z[0] = s->x[0]; z[1] = s->x[1];
+    for (int i = 0; i < 4; ++i) z[2 + i] = us[i];
+    pk_mlp({st_tab}, {n_st}, z, f);
+    s->x[0] = s->x[0] + NSS_DT * f[0];
+    s->x[1] = s->x[1] + NSS_DT * f[1];
+    s->vx_now = s->x[0] * ST_SC[0] + ST_OFF[0];
+    pk_yaw(s->x, us[3], &s->yaw_prev);
+}}
+
+void pk_run(pk_chain *s, const double *cmds, long n, double *out) {{
+    for (long k = 0; k < n; ++k) pk_step(s, cmds + 4 * k, out + PK_NOUT * k);
+}}
+"""

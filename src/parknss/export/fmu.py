@@ -1,0 +1,150 @@
+"""``parknss export fmu``: the chain as an FMI 2.0 co-simulation FMU.
+
+:func:`export_fmu` loads a chain artefact, generates its C step
+(:func:`parknss.chain.ccode.chain_c_source`) and the FMI wrapper
+(:mod:`parknss.export.fmi2_source`), compiles them with the system C compiler against
+FMPy's FMI 2.0 headers into ``binaries/linux64/parknss_chain.so`` and zips::
+
+    modelDescription.xml        inputs, outputs, parameters (value references, units in
+                                the descriptions), DefaultExperiment step 0.01 s
+    sources/                    pk_chain.h, pk_chain.c, fmi2_chain.c, buildDescription.xml
+    binaries/linux64/           the shared library
+    resources/chain.json        the artefact's chain.json (provenance)
+
+The FMU is written atomically; an existing file is refused unless ``overwrite``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+import tempfile
+import time
+import uuid
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+from parknss.chain.ccode import chain_c_source
+from parknss.chain.deployed import load_chain
+from parknss.chain.native import build_shared
+from parknss.config import SHIPPED_CHAIN
+from parknss.errors import ParknssError
+from parknss.export.fmi2_source import INPUTS, OUTPUTS, VARIABLES, wrapper_source
+from parknss.outputs import OutputExistsError, atomic_file
+
+MODEL_ID = "parknss_chain"
+WRAPPER = "fmi2_chain.c"
+
+
+@dataclass(frozen=True)
+class FmuReport:
+    """What was written: the FMU path, its GUID, the size in bytes, the build time (s)."""
+
+    path: Path
+    guid: str
+    bytes: int
+    build_s: float
+
+    def to_json(self) -> dict:
+        return {"fmu": str(self.path), "guid": self.guid, "bytes": self.bytes,
+                "build_s": round(self.build_s, 3)}
+
+
+def fmi_headers() -> Path:
+    """FMPy's FMI headers (``fmpy/c-code``); one-line ParknssError when absent."""
+    try:
+        import fmpy
+    except ImportError as exc:
+        raise ParknssError("FMPy is not installed (it ships the FMI 2.0 headers)") from exc
+    d = Path(fmpy.__file__).parent / "c-code"
+    if not (d / "fmi2Functions.h").is_file():
+        raise ParknssError(f"{d}: FMPy's FMI 2.0 headers not found")
+    return d
+
+
+def _platform() -> str:
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise ParknssError(f"FMU binaries are built for linux64 only, not "
+                           f"{platform.system()} {platform.machine()}")
+    return "linux64"
+
+
+def model_description(guid: str, description: str) -> str:
+    """modelDescription.xml of the chain FMU."""
+    rows, index = [], {}
+    for i, v in enumerate(VARIABLES, start=1):
+        index[v.vr] = i
+        if v.causality == "output":
+            attrs, real = 'variability="continuous" initial="calculated"', "<Real/>"
+        elif v.causality == "input":
+            attrs, real = 'variability="continuous"', f'<Real start="{v.start!r}"/>'
+        else:
+            attrs, real = 'variability="fixed" initial="exact"', f'<Real start="{v.start!r}"/>'
+        rows.append(f'    <ScalarVariable name="{v.name}" valueReference="{v.vr}" '
+                    f'causality="{v.causality}" {attrs} '
+                    f'description={quoteattr(v.description)}>{real}</ScalarVariable>')
+    outs = "\n".join(f'      <Unknown index="{index[v.vr]}"/>' for v in OUTPUTS)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="{MODEL_ID}" guid="{guid}"
+  description={quoteattr(description)} generationTool="parknss"
+  variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{MODEL_ID}" canHandleVariableCommunicationStepSize="true"
+    canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true"/>
+  <DefaultExperiment startTime="0" stepSize="0.01"/>
+  <ModelVariables>
+{chr(10).join(rows)}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+{outs}
+    </Outputs>
+    <InitialUnknowns>
+{outs}
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""
+
+
+_BUILD = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiBuildDescription fmiVersion="3.0">
+  <BuildConfiguration modelIdentifier="{mid}">
+    <SourceFileSet language="C99">
+      <SourceFile name="pk_chain.c"/>
+      <SourceFile name="{wrapper}"/>
+    </SourceFileSet>
+  </BuildConfiguration>
+</fmiBuildDescription>
+"""
+
+
+def export_fmu(out: str | Path, chain_dir: str | Path | None = None,
+               overwrite: bool = False) -> FmuReport:
+    """Write the FMU of the chain at ``chain_dir`` (default: the shipped chain) to ``out``."""
+    t0 = time.perf_counter()
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise ParknssError(f"{out}: an FMU file name ends in .fmu")
+    if out.exists() and not overwrite:
+        raise OutputExistsError(f"{out}: already exists (pass --overwrite to replace it)")
+    plat = _platform()
+    src_dir = Path(chain_dir) if chain_dir is not None else SHIPPED_CHAIN
+    dep = load_chain(src_dir)
+    csrc = chain_c_source(dep.rt, name=f"parknss chain {src_dir.name}")
+    guid = "{" + str(uuid.UUID(hashlib.sha256(csrc.source.encode()).hexdigest()[:32])) + "}"
+    files = {**csrc.files(), WRAPPER: wrapper_source(guid)}
+    with tempfile.TemporaryDirectory(prefix="parknss-fmu-") as tmp:
+        lib = build_shared(files, Path(tmp) / f"{MODEL_ID}.so", include=[fmi_headers()])
+        lib_bytes = lib.read_bytes()
+    md = model_description(guid, f"parknss command-to-vehicle chain ({src_dir.name}): "
+                           f"{', '.join(v.name for v in INPUTS)} -> vehicle, 10 ms")
+    with atomic_file(out) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("modelDescription.xml", md)
+        for name, text in files.items():
+            zf.writestr(f"sources/{name}", text)
+        zf.writestr("sources/buildDescription.xml", _BUILD.format(mid=MODEL_ID, wrapper=WRAPPER))
+        zf.writestr(f"binaries/{plat}/{MODEL_ID}.so", lib_bytes)
+        zf.write(src_dir / "chain.json", "resources/chain.json")
+    return FmuReport(out, guid, out.stat().st_size, time.perf_counter() - t0)

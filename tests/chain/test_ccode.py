@@ -1,0 +1,84 @@
+"""The generated C step (through ctypes) equals the NumPy real-time twin for every
+architecture and input variant, the gear rule included; the native engine of
+DeployedChain is the same plant."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from helpers.actuators import tiny_config
+from parknss.actuators.envelopes import identify_envelope
+from parknss.actuators.fit import fit_candidate
+from parknss.actuators.spec import CandidateSpec
+from parknss.chain import DeployedChain
+from parknss.chain.native import NativeChain
+from parknss.chain.score import make_chain
+from parknss.plant import Commands
+
+torch.set_num_threads(1)
+
+SETS = [
+    {"drive": "drive/hammerstein/phys", "brake": "brake/gru/uniform",
+     "steering": "steering/lag1/cmd"},
+    {"drive": "drive/lag2/uniform", "brake": "brake/lstm/phys",
+     "steering": "steering/narx/uniform"},
+    {"drive": "drive/static/phys", "brake": "brake/narx1s/cmd", "steering": "steering/gru/cmd"},
+]
+
+
+@pytest.fixture(scope="module")
+def chains(actuator_campaign, actuator_nss):
+    camp = list(actuator_campaign)
+    nss, _ = actuator_nss
+    cfg = tiny_config()
+    env = identify_envelope(camp, cfg.envelope)
+    out = []
+    for s in SETS:
+        models = {ch: fit_candidate(CandidateSpec.parse(n), camp[:3], cfg, env)[0]
+                  for ch, n in s.items()}
+        out.append(DeployedChain(make_chain(nss, models, env)))
+    return camp, out
+
+
+def _replay(stepper, cm, x0, y0):
+    stepper.start(x0, y0, cm[0])
+    rows = []
+    for c in cm:
+        act, st = stepper.step(*c)
+        rows.append([*act, *st, stepper.gear])
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("which", range(len(SETS)))
+def test_c_equals_numpy_twin(chains, which):
+    camp, deps = chains
+    dep = deps[which]
+    nat = NativeChain(dep.rt)
+    for tr in camp[:3]:
+        cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd")).copy()
+        cm[7, 1] = np.nan  # the NaN hold and the clamps are part of the step
+        cm[9, 3] = np.inf
+        x0 = [tr["vx"][0], tr["yaw_rate"][0]]
+        y0 = [tr["torque"][0], tr["brake_pressure"][0], tr["steer"][0]]
+        a, b = _replay(dep.rt, cm, x0, y0), _replay(nat, cm, x0, y0)
+        assert np.max(np.abs(a - b)) <= 1e-9
+        assert np.array_equal(a[:, 7], b[:, 7])  # the engaged gear, exactly
+        nat.start(x0, y0, cm[0])
+        assert np.max(np.abs(nat.run(cm) - a)) <= 1e-9
+
+
+def test_native_engine_is_the_same_plant(chains):
+    _, deps = chains
+    dep = deps[0]
+    nat = DeployedChain(dep.chain, engine="native")
+    rng = np.random.default_rng(3)
+    dep.reset(gear=1)
+    nat.reset(gear=1)
+    for _ in range(200):
+        c = Commands(int(rng.integers(-1, 2)), float(rng.uniform(0, 60)),
+                     float(rng.uniform(-0.8, 0)), float(rng.uniform(-300, 300)))
+        a, b = dep.step(c), nat.step(c)
+        assert a.gear == b.gear
+        assert abs(a.vx - b.vx) <= 1e-9 and abs(a.steer - b.steer) <= 1e-9
