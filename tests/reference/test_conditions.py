@@ -1,7 +1,8 @@
-"""Per-trial conditions of the reference vehicle (issue 14): profile ``none`` reproduces the
-bundled campaign bit for bit, every condition shows where its physics says it should, the
-draw is deterministic and documented, the ground truth round-trips through the campaign
-files and identification code never reads it."""
+"""Per-trial conditions of the reference vehicle (issue 14): the default profile (typical)
+reproduces the bundled campaign bit for bit, profile ``none`` is the nominal car, every
+condition shows where its physics says it should, the draw is deterministic and
+documented, the ground truth round-trips through the campaign files and identification
+code never reads it."""
 
 from __future__ import annotations
 
@@ -55,7 +56,7 @@ def run(c: np.ndarray, conditions=None, params=P0) -> dict[str, np.ndarray]:
     return ReferenceVehicle(params, seed=7, conditions=conditions).simulate(c)
 
 
-# ----------------------------------------------------------------- profile none == before
+# ------------------------------------------------- the bundled campaign is the default draw
 @pytest.fixture(scope="module")
 def none_campaign(tmp_path_factory):
     out = tmp_path_factory.mktemp("none") / "c"
@@ -64,15 +65,34 @@ def none_campaign(tmp_path_factory):
     return read_campaign(out)
 
 
-def test_profile_none_reproduces_the_bundled_campaign_bit_for_bit(none_campaign):
-    bundled = read_campaign(BUNDLED_CAMPAIGN)
-    assert none_campaign.ids == bundled.ids and none_campaign.meta == bundled.meta
-    for new, old in zip(none_campaign, bundled, strict=True):
+def test_the_default_profile_reproduces_the_bundled_campaign_bit_for_bit(tmp_path):
+    """`parknss campaign generate --seed 0` (profile from the YAML: typical) is the bundled
+    campaign, so the shipped models are reproducible from the shipped configuration."""
+    out = tmp_path / "c"
+    assert main(["campaign", "generate", "--out", str(out), "--seed", "0"]) == 0
+    new_c, bundled = read_campaign(out), read_campaign(BUNDLED_CAMPAIGN)
+    assert new_c.ids == bundled.ids and new_c.meta == bundled.meta
+    for new, old in zip(new_c, bundled, strict=True):
         assert set(new.channels) == set(old.channels)
         for name in old.channels:
             np.testing.assert_array_equal(new[name], old[name], err_msg=f"{old.id} {name}")
-        assert new.provenance == old.provenance  # no conditions key, same digests
+        assert new.provenance == old.provenance
+        assert trial_conditions(new.provenance) is not None
+
+
+def test_profile_none_is_the_nominal_car_and_shares_the_maneuver_plan(none_campaign):
+    """Profile none draws no conditions (no ground-truth key); the maneuver plans and the
+    noise come from the same streams as under a profile, so a trial drawn at the same
+    attempt has the same plan and noise seeds under both."""
+    bundled = read_campaign(BUNDLED_CAMPAIGN)
+    assert none_campaign.ids == bundled.ids
+    for new, old in zip(none_campaign, bundled, strict=True):
         assert trial_conditions(new.provenance) is None
+        assert trial_conditions(old.provenance) is not None
+        pn, po = json.loads(new.provenance), json.loads(old.provenance)
+        if pn["attempt"] == po["attempt"]:  # a trial whose length left 21-64 s is redrawn
+            for key in ("plan_seed", "noise_seed", "planned_reversals"):
+                assert pn[key] == po[key], key
 
 
 def test_physics_checks_hold_on_the_flat_unloaded_campaign(none_campaign):
@@ -179,7 +199,8 @@ def test_imu_bias_misalignment_and_yaw_rate_drift_at_rest():
 # ----------------------------------------------------------------- the draw
 def test_draw_is_deterministic_in_range_and_harsh_stretches_typical():
     cfg = ConditionsConfig()
-    assert draw_conditions(cfg, 0, 0, 1) is None  # profile none: nothing drawn
+    assert draw_conditions(cfg, 0, 0, 1, "none") is None  # profile none: nothing drawn
+    assert draw_conditions(cfg, 0, 0, 1) == draw_conditions(cfg, 0, 0, 1, "typical")  # default
     a = draw_conditions(cfg, 5, 2, 3, "typical")
     assert a == draw_conditions(cfg, 5, 2, 3, "typical")
     assert a != draw_conditions(cfg, 6, 2, 3, "typical")
@@ -267,7 +288,9 @@ def test_harsh_campaign_completes_at_parking_speed():
     assert max(np.max(np.abs(tr["truth_vx"])) for tr in c) < kmh_to_ms(4.0)
 
 
-def test_describe_shows_the_conditions_when_present(typical_campaign, tmp_path, capsys):
+def test_describe_shows_the_conditions_when_present(
+    typical_campaign, none_campaign, tmp_path, capsys
+):
     out = write_campaign(typical_campaign, tmp_path / "c")
     assert main(["campaign", "describe", str(out)]) == 0
     text = capsys.readouterr().out
@@ -276,7 +299,8 @@ def test_describe_shows_the_conditions_when_present(typical_campaign, tmp_path, 
     assert main(["campaign", "describe", str(out), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert set(doc["conditions"]) == set(typical_campaign.ids)
-    assert main(["campaign", "describe", str(BUNDLED_CAMPAIGN)]) == 0
+    bare = write_campaign(none_campaign, tmp_path / "none")
+    assert main(["campaign", "describe", str(bare)]) == 0
     assert "conditions (ground truth" not in capsys.readouterr().out
 
 

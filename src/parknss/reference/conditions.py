@@ -193,7 +193,7 @@ class ConditionsConfig(StrictModel):
     ranges of each profile and the constants of the condition models."""
 
     profile: Literal["none", "typical", "harsh"] = Field(
-        "none", description="profile the campaign draws from (none | typical | harsh)"
+        "typical", description="profile the campaign draws from (none | typical | harsh)"
     )
     model: ConditionModelParams = ConditionModelParams()
     typical: ConditionRanges = TYPICAL
