@@ -38,6 +38,21 @@ class DenseCheckConfig(StrictModel):
 # Polygons
 
 
+def vertex_array(vertices, name: str, min_count: int) -> np.ndarray:
+    """``vertices`` as a finite (M, 2) float array of at least ``min_count`` rows;
+    PlanningError naming ``name`` in one line otherwise."""
+    try:
+        v = np.asarray(vertices, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise PlanningError(f"{name}: vertices are not numbers") from exc
+    if v.ndim != 2 or v.shape[1] != 2 or len(v) < min_count:
+        raise PlanningError(
+            f"{name}: need at least {min_count} [x, y] vertices, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise PlanningError(f"{name}: vertices must be finite")
+    return v
+
+
 def convex_polygon(vertices, name: str = "polygon") -> np.ndarray:
     """Validate a convex polygon and return it as a (M, 2) counter-clockwise array.
 
@@ -47,14 +62,7 @@ def convex_polygon(vertices, name: str = "polygon") -> np.ndarray:
     from the origin (TPCAP cases near 4e9 m) is judged like the same one at the origin.
     Scenes as drawn (non-convex, walls) go through :mod:`parknss.sim.obstacles`.
     """
-    try:
-        v = np.asarray(vertices, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise PlanningError(f"{name}: vertices are not numbers") from exc
-    if v.ndim != 2 or v.shape[1] != 2 or len(v) < 3:
-        raise PlanningError(f"{name}: need at least 3 [x, y] vertices, got shape {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise PlanningError(f"{name}: vertices must be finite")
+    v = vertex_array(vertices, name, 3)
     loc = v - v[0]  # a local frame: area and convexity do not depend on where the map lies
     e = np.roll(loc, -1, axis=0) - loc
     cross = e[:, 0] * np.roll(e[:, 1], -1) - e[:, 1] * np.roll(e[:, 0], -1)

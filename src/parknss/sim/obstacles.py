@@ -34,6 +34,7 @@ from pydantic import Field
 
 from parknss.config import StrictModel
 from parknss.errors import PlanningError
+from parknss.sim.geometry import vertex_array
 
 SHAPES = ("polygon", "polyline")
 
@@ -186,14 +187,7 @@ def drawn_obstacle(
     cfg = cfg or ObstacleInputConfig()
     if shape not in SHAPES:
         raise PlanningError(f"{name}: shape must be one of {', '.join(SHAPES)}, got {shape!r}")
-    try:
-        v = np.asarray(vertices, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise PlanningError(f"{name}: vertices are not numbers") from exc
-    if v.ndim != 2 or v.shape[1] != 2 or len(v) < 2:
-        raise PlanningError(f"{name}: need at least 2 [x, y] vertices, got shape {v.shape}")
-    if not np.all(np.isfinite(v)):
-        raise PlanningError(f"{name}: vertices must be finite")
+    v = vertex_array(vertices, name, 2)
     if len(v) > cfg.max_vertices_per_obstacle:
         raise PlanningError(
             f"{name}: {len(v)} vertices, more than max_vertices_per_obstacle "
