@@ -41,6 +41,13 @@ def test_reproduce_quick_writes_the_report(tmp_path, tiny_study, capsys):
     assert summary["git_revision"] in html
     assert "&quot;loss_lrs&quot;" in html  # the resolved config
     assert "seed_noise.png" in summary["files"]
+    # a smoke test says so and gives no verdict (issue 15, item 4)
+    assert "Smoke test." in html and summary["verdicts"]
+    assert set(summary["verdicts"].values()) == {"smoke test"}
+    assert ">agrees<" not in html and ">differs<" not in html and ">within noise<" not in html
+    assert main([*argv, "--config", str(cfg), "--out", str(out)]) == 0  # resumes, text
+    text = capsys.readouterr().out
+    assert "smoke test (--quick): no verdict" in text and "differs" not in text
 
 
 def test_study_json_and_floor_file(tmp_path, tiny_study, capsys):

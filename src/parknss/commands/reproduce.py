@@ -41,4 +41,11 @@ def register(app: typer.Typer) -> None:
                                  address=address, data=data, out=out, config=config,
                                  overwrite=overwrite)
         summary = run(inputs, lambda msg: typer.echo(msg, err=True))
-        typer.echo(json.dumps(summary, indent=2) if as_json else f"report: {summary['report']}")
+        if as_json:
+            typer.echo(json.dumps(summary, indent=2))
+            return
+        if summary["quick"]:
+            typer.echo("smoke test (--quick): no verdict on the paper's findings")
+        for claim, verdict in summary["verdicts"].items():
+            typer.echo(f"  {verdict:14s} {claim}")
+        typer.echo(f"report: {summary['report']}")

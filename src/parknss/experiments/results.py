@@ -25,6 +25,9 @@ class Table:
     rows: list[list[Any]]
 
 
+SMOKE_TEST = "smoke test"
+
+
 @dataclass
 class Finding:
     """One of the paper's findings beside what this toolkit measured.
@@ -44,6 +47,11 @@ class Finding:
         if self.agrees is None:
             return self.undecided
         return "agrees" if self.agrees else "differs"
+
+    def smoke_test(self) -> Finding:
+        """The same row without a verdict: a ``--quick`` budget (a few epochs of a tiny
+        net) shows that the pipeline runs, not how the paper's claim fares."""
+        return Finding(self.claim, self.measured, None, SMOKE_TEST)
 
 
 @dataclass

@@ -15,7 +15,7 @@ body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:3px 8px;
 text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
 img{max-width:100%;border:1px solid #eee}.yes{color:#060}.no{color:#a00}.na{color:#777}
-pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}
+pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}.smoke{background:#fff3cd;padding:.6em;border:1px solid #e0c36c}
 """
 
 
@@ -58,6 +58,12 @@ def write_report(
         "vehicle unless the data path below says otherwise; these are not the paper's "
         "field-test numbers.</p>",
     ]
+    if meta.get("quick"):
+        parts.append(
+            "<p class='smoke'><b>Smoke test.</b> This run used the <code>--quick</code> "
+            "budget (a few epochs of a tiny net): it shows that every study runs end to "
+            "end; its numbers support no verdict on the paper's findings.</p>"
+        )
     findings = [f for _, res in sections for f in res.findings]
     if findings:
         rows = "".join(_finding_row(f) for f in findings)
