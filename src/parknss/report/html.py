@@ -15,7 +15,8 @@ body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:3px 8px;
 text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
 img{max-width:100%;border:1px solid #eee}.yes{color:#060}.no{color:#a00}.na{color:#777}
-pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}.smoke{background:#fff3cd;padding:.6em;border:1px solid #e0c36c}
+pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}
+.smoke{background:#fff3cd;padding:.6em;border:1px solid #e0c36c}
 """
 
 
