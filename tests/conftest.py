@@ -1,8 +1,9 @@
 """Fixtures shared across the test folders: the actuator/chain tests' tiny campaign, NSS and
 config, the experiment tests' tiny campaign and studies config, the real logs beside the
-checkout, and the headless browser. The builders behind them are the ``helpers`` package
-(tests/helpers/), which test modules also import directly when they need other sizes or
-seeds; no test module imports another."""
+checkout, and the headless browser; the checkout's result store is off for every test.
+The builders behind them are the ``helpers`` package (tests/helpers/), which test modules
+also import directly when they need other sizes or seeds; no test module imports
+another."""
 
 from __future__ import annotations
 
@@ -16,6 +17,10 @@ import pytest
 from helpers.actuators import tiny_campaign, tiny_config, tiny_nss
 from helpers.experiments import tiny_setup
 from helpers.paths import REALDATA
+
+# no test writes into the checkout's result store (results/): studies and reproduce runs
+# default to it; the store tests name their own folder with --store
+os.environ["PARKNSS_RESULTS"] = "off"
 
 # --- the real logs (../shared/realdata, read in place) -------------------------------------
 

@@ -3,7 +3,7 @@ import json
 import pytest
 
 from parknss.errors import ConfigError
-from parknss.executor import Job, ResultCache, run_jobs
+from parknss.executor import Job, ResultCache, Tally, run_jobs
 
 PROBE = "parknss.experiments.probe:probe_fit"
 
@@ -53,3 +53,27 @@ def test_ray_matches_local():
     local = run_jobs(_jobs(3), workers=1, progress=False)
     remote = run_jobs(_jobs(3), executor="ray", workers=2, progress=False)
     assert local == remote
+
+
+def test_a_store_behind_the_cache(tmp_path):
+    class DictStore:
+        def __init__(self):
+            self.docs, self.times = {}, {}
+
+        def get(self, job):
+            return (job.key() in self.docs), self.docs.get(job.key())
+
+        def put(self, job, result, wall_s, cpu_s):
+            self.docs[job.key()], self.times[job.key()] = result, (wall_s, cpu_s)
+
+    store, jobs = DictStore(), _jobs(2)
+    tally = Tally()
+    first = run_jobs(jobs, workers=1, cache_dir=tmp_path / "a", progress=False, store=store,
+                     tally=tally)
+    assert tally.to_json() == {"cache": 0, "store": 0, "computed": 2}
+    assert all(w >= 0 and c >= 0 for w, c in store.times.values())
+    assert ResultCache(tmp_path / "a").get(jobs[0])[0]  # computed: in the cache and the store
+    again = run_jobs(jobs, workers=1, cache_dir=tmp_path / "b", progress=False, store=store,
+                     tally=tally)
+    assert again == first and tally.to_json() == {"cache": 0, "store": 2, "computed": 2}
+    assert not ResultCache(tmp_path / "b").get(jobs[0])[0]  # a stored result is not copied

@@ -35,6 +35,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "web",
     "nss",
     "study",
+    "results",
     "export",
 )
 

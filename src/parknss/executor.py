@@ -7,6 +7,12 @@ identically on a local joblib (loky) process pool, in-process (``workers=1``), o
 cluster, and every finished job is cached on disk under the hash of its (function,
 arguments), so an interrupted sweep resumes where it stopped. Nothing is ever pickled to
 disk. Each worker uses one torch thread (training is per-op overhead bound).
+
+A second, longer-lived lookup can sit behind the cache: any object with the :class:`Store`
+methods (the experiments' result store in the repository, :mod:`parknss.experiments.store`).
+A job is read from the cache, else from the store, else computed; a computed result is
+written to both (with the wall and CPU time its worker spent).
+A :class:`Tally` counts where the results came from.
 """
 
 from __future__ import annotations
@@ -16,10 +22,11 @@ import importlib
 import json
 import os
 import sys
+import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from tqdm import tqdm
 
@@ -64,6 +71,38 @@ def execute(job: Job, torch_threads: int = 1) -> Any:
     return result
 
 
+def execute_timed(job: Job, torch_threads: int = 1) -> tuple[Any, float, float]:
+    """(result, wall s, CPU s) of :func:`execute`, timed in the process that runs it."""
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    result = execute(job, torch_threads)
+    return result, time.perf_counter() - wall0, time.process_time() - cpu0
+
+
+class Store(Protocol):
+    """A lookup behind the run cache: ``get`` is ``(hit, result)``; ``put`` records a
+    computed result with the wall and CPU seconds its worker spent on it."""
+
+    def get(self, job: Job) -> tuple[bool, Any]: ...
+
+    def put(self, job: Job, result: Any, wall_s: float, cpu_s: float) -> None: ...
+
+
+@dataclass
+class Tally:
+    """Where the results of one or more :func:`run_jobs` calls came from."""
+
+    cache: int = 0
+    store: int = 0
+    computed: int = 0
+
+    @property
+    def total(self) -> int:
+        return self.cache + self.store + self.computed
+
+    def to_json(self) -> dict[str, int]:
+        return {"cache": self.cache, "store": self.store, "computed": self.computed}
+
+
 class ResultCache:
     """A folder of ``<key>.json`` results, written atomically."""
 
@@ -103,6 +142,8 @@ def run_jobs(
     address: str | None = None,
     progress: bool = True,
     desc: str = "jobs",
+    store: Store | None = None,
+    tally: Tally | None = None,
 ) -> list[Any]:
     """Run ``jobs`` and return their results in the order given.
 
@@ -111,6 +152,8 @@ def run_jobs(
         workers: parallel workers (default: the machine's cores).
         cache_dir: if given, finished results are read from / written to this folder.
         address: Ray cluster address (``None`` starts a local Ray with ``workers`` CPUs).
+        store: if given, asked for what the cache lacks; computed results are put in it.
+        tally: if given, counts the results from the cache, the store and computed.
     """
     if executor not in EXECUTORS:
         raise ConfigError(f"executor {executor!r} is not one of {EXECUTORS}")
@@ -118,10 +161,17 @@ def run_jobs(
     cache = ResultCache(cache_dir) if cache_dir is not None else None
     results: list[Any] = [None] * len(jobs)
     todo: list[int] = []
+    count = Tally()
     for i, job in enumerate(jobs):
         hit, value = cache.get(job) if cache else (False, None)
         if hit:
             results[i] = value
+            count.cache += 1
+            continue
+        hit, value = store.get(job) if store else (False, None)
+        if hit:  # not copied into the cache: it holds what this run computed
+            results[i] = value
+            count.store += 1
         else:
             todo.append(i)
     bar = tqdm(
@@ -132,32 +182,46 @@ def run_jobs(
         file=sys.stderr,
     )
     runner = _run_ray if executor == "ray" else _run_local
-    for i, value in runner([jobs[i] for i in todo], todo, workers, address):
+    for i, (value, wall_s, cpu_s) in runner([jobs[i] for i in todo], todo, workers, address):
         results[i] = value
         if cache:
             cache.put(jobs[i], value)
+        if store:
+            store.put(jobs[i], value, wall_s, cpu_s)
+        count.computed += 1
         bar.update(1)
     bar.close()
+    if progress and store is not None:
+        print(f"{desc}: {count.cache} from the run cache, {count.store} from the store, "
+              f"{count.computed} computed", file=sys.stderr)
+    if tally is not None:
+        tally.cache += count.cache
+        tally.store += count.store
+        tally.computed += count.computed
     return results
+
+
+Timed = tuple[Any, float, float]  # (result, wall s, CPU s) of execute_timed
 
 
 def _run_local(
     jobs: list[Job], index: list[int], workers: int, address: str | None
-) -> Iterable[tuple[int, Any]]:
+) -> Iterable[tuple[int, Timed]]:
     if workers == 1 or len(jobs) <= 1:
         for i, job in zip(index, jobs, strict=True):
-            yield i, execute(job)
+            yield i, execute_timed(job)
         return
     from joblib import Parallel, delayed, parallel_config
 
     with parallel_config(backend="loky", inner_max_num_threads=1):
-        gen = Parallel(n_jobs=workers, return_as="generator")(delayed(execute)(j) for j in jobs)
+        run = Parallel(n_jobs=workers, return_as="generator")
+        gen = run(delayed(execute_timed)(j) for j in jobs)
         yield from zip(index, gen, strict=True)
 
 
 def _run_ray(
     jobs: list[Job], index: list[int], workers: int, address: str | None
-) -> Iterable[tuple[int, Any]]:
+) -> Iterable[tuple[int, Timed]]:
     try:
         import ray
     except ImportError as exc:
@@ -174,7 +238,7 @@ def _run_ray(
             os.environ.setdefault("RAY_worker_niceness", str(max(0, os.nice(0))))
         ray.init(include_dashboard=False, log_to_driver=False, runtime_env=env, **kwargs)
     try:
-        remote = ray.remote(num_cpus=1)(execute)
+        remote = ray.remote(num_cpus=1)(execute_timed)
         # results come back in completion order; they are stored by index
         refs = {remote.remote(job): i for i, job in zip(index, jobs, strict=True)}
         pending = list(refs)

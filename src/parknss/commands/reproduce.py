@@ -1,7 +1,8 @@
 """``parknss reproduce``: run the paper's tables and figures and write an HTML report
 (:func:`parknss.experiments.reproduce.reproduce`) into a run folder that the same
 artefacts and budget resume (cache) and that is refused, holding anything else, unless
-``--overwrite``."""
+``--overwrite``; fits are read from the result store (``--store DIR|off``) and only the
+missing ones are fitted (``--refit``: all)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,10 @@ def register(app: typer.Typer) -> None:
             False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
         ),
         as_json: bool = typer.Option(False, "--json", help="Print the run summary as JSON."),
+        store: str | None = typer.Option(
+            None, "--store", help="Result store folder or 'off' (default: results/)."
+        ),
+        refit: bool = typer.Option(False, "--refit", help="Refit what the store holds."),
     ) -> None:
         """Reproduce the paper's tables and figures (on the synthetic campaign by default)."""
         from parknss.experiments.reproduce import ReproduceInputs, artefact_list
@@ -39,7 +44,7 @@ def register(app: typer.Typer) -> None:
             return
         inputs = ReproduceInputs(name=name, quick=quick, executor=executor, workers=workers,
                                  address=address, data=data, out=out, config=config,
-                                 overwrite=overwrite)
+                                 overwrite=overwrite, store=store, refit=refit)
         summary = run(inputs, lambda msg: typer.echo(msg, err=True))
         if as_json:
             typer.echo(json.dumps(summary, indent=2))

@@ -6,7 +6,8 @@
 ``<out>/cache`` that every study run into the same ``--out`` with the same budget,
 campaign, configs and floor shares and resumes; an ``--out`` holding anything else is
 refused unless ``--overwrite`` (:func:`parknss.experiments.studies.run_study`);
-``--floor`` names the seed-noise floor (``measure``, ``paper`` or a seed-noise JSON).
+``--floor`` names the seed-noise floor (``measure``, ``paper`` or a seed-noise JSON);
+fits are read from the result store (``--store DIR|off``; ``--refit``: fit them all).
 ``parknss study estimate`` counts each study's fits and epochs and converts them to CPU
 hours.
 """
@@ -35,6 +36,10 @@ def register(app: typer.Typer) -> None:
     config_opt = typer.Option(None, "--config", help="Experiments YAML.")
     data_opt = typer.Option(None, "--data", help="Campaign folder.")
     json_opt = typer.Option(False, "--json", help="Print one JSON document.")
+    store_opt = typer.Option(
+        None, "--store", help="Result store folder or 'off' (default: results/)."
+    )
+    refit_opt = typer.Option(False, "--refit", help="Refit what the store holds.")
 
     def _make(name: str):
         def command(
@@ -52,13 +57,15 @@ def register(app: typer.Typer) -> None:
                 False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
             ),
             as_json: bool = json_opt,
+            store: str | None = store_opt,
+            refit: bool = refit_opt,
         ) -> None:
             from parknss.experiments.studies import StudyInputs, run_study, study_text
 
             folder = out or Path("runs") / f"study-{name}{'-quick' if quick else ''}"
             inputs = StudyInputs(name=name, out=folder, quick=quick, executor=executor,
                                  workers=workers, address=address, data=data, config=config,
-                                 floor=floor, overwrite=overwrite)
+                                 floor=floor, overwrite=overwrite, store=store, refit=refit)
             run = run_study(inputs, _log)
             if as_json:
                 typer.echo(json.dumps(run.doc, indent=2, default=str))

@@ -12,6 +12,7 @@ registration order (:mod:`parknss.experiments.registry` looks them up by name).
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 from parknss.experiments.results import Artefact, ArtefactResult, RunContext, Table
 
@@ -170,6 +171,8 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         cache_dir=ctx.cache_dir,
         save_dir=models,
         progress=ctx.progress,
+        store=ctx.store,
+        tally=ctx.tally,
     )
     rows = []
     for i, _ in enumerate(res.folds["nss"]):
@@ -185,16 +188,18 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *(label for _, label in COLUMNS)],
         rows,
     )
-    figs = []
     fold0 = res.folds["nss"][0]
-    model_dir = fold0.get("model_dir") or str(models / "nss_fold0")
+    model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
+                      if d and (Path(d) / "model.json").is_file()), None)
+    if model_dir is None:  # scores from the result store, which keeps no weights
+        return ArtefactResult([table], [], notes="Fig. 5 is not drawn: the NSS fold-0 model "
+                              "is not on this machine (its scores came from the result store, "
+                              "which keeps no weights); --refit draws it.")
     campaign = ctx.campaign()
     val = pick_maneuvers([campaign[i] for i in fold0["val"]])
     pred = predict_trials(load_model(model_dir).model, val)
-    figs.append(
-        draw_rollouts(val, pred, ctx.out_dir / "fig5_rollouts.png", fold0.get("window_length"))
-    )
-    return ArtefactResult([table], figs)
+    fig = draw_rollouts(val, pred, ctx.out_dir / "fig5_rollouts.png", fold0.get("window_length"))
+    return ArtefactResult([table], [fig])
 
 
 # ---------------------------------------------------------------- other parts' artefacts

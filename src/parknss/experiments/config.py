@@ -1,13 +1,15 @@
 """Configuration of the evaluation studies (``configs/experiments.yaml``).
 
 Budgets (``full``: the paper's; ``quick``: a smoke test), the seed-noise and convergence
-splits, the learning-curve grid and the Table III ablation axes. Each axis option is a set
-of NSS config overrides (``{section: {field: value}}``, see
+splits, the learning-curve grid, the Table III ablation axes and the result store. Each
+axis option is a set of NSS config overrides (``{section: {field: value}}``, see
 :func:`parknss.nss.config.with_overrides`) and optionally a training-window rule.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 from typing import Any, Literal
 
@@ -93,6 +95,16 @@ class AblationAxis(StrictModel):
         return v
 
 
+class StoreConfig(StrictModel):
+    """The result store (:mod:`parknss.experiments.store`)."""
+
+    dir: str = Field(
+        "auto", description="auto: the checkout's results/ (off in an installed wheel); off; "
+        "or a folder. --store and $PARKNSS_RESULTS take precedence"
+    )
+    write_quick: bool = Field(False, description="--quick runs write their fits to the store")
+
+
 class ExperimentsConfig(StrictModel):
     """Everything the studies need besides the NSS config itself."""
 
@@ -113,6 +125,13 @@ class ExperimentsConfig(StrictModel):
     full: Budget = Budget()
     quick: Budget = Budget(epochs=4, convergence_epochs=8, folds=[0, 1], ablation_folds=[0])
     axes: list[AblationAxis] = Field(default_factory=list)
+    store: StoreConfig = StoreConfig()
+
+    def digest(self) -> str:
+        """Stable short hash of the values that decide results (run folders): the ``store``
+        section is left out, where fits are kept does not change them."""
+        blob = json.dumps(self.model_dump(mode="json", exclude={"store"}), sort_keys=True)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
     def budget(self, quick: bool) -> Budget:
         return self.quick if quick else self.full

@@ -30,7 +30,7 @@ import numpy as np
 
 from parknss.data.splits import DEFAULT_FOLDS, FoldPlan, cv_plan
 from parknss.errors import ConfigError
-from parknss.executor import Job, run_jobs
+from parknss.executor import Job, Store, Tally, run_jobs
 from parknss.experiments.config import merge_overrides
 from parknss.experiments.folds import fold_config
 from parknss.nss.campaigns import load_campaign
@@ -169,11 +169,15 @@ def run_cv(
     save_dir: str | Path | None = None,
     progress: bool = True,
     plan: FoldPlan | None = None,
+    store: Store | None = None,
+    tally: Tally | None = None,
 ) -> CVResult:
     """Run the CV of every variant (default: nss, nss_direct_yaw, linear) on the same folds.
 
     ``plan``: the campaign's CV fold plan, for the result's ``stratified`` and ``note``
     (computed from the campaign when not given; the fold jobs build the same folds).
+    ``store``, ``tally``: the result store and the count of where results came from
+    (:func:`parknss.executor.run_jobs`).
     """
     variants = list(variants or MODEL_VARIANTS)
     for v in variants:
@@ -190,6 +194,8 @@ def run_cv(
         address=address,
         progress=progress,
         desc="cv folds",
+        store=store,
+        tally=tally,
     )
     folds: dict[str, list[dict]] = {v: [] for v in variants}
     for (var, _), res in zip(pairs, results, strict=True):

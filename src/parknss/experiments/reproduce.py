@@ -11,6 +11,14 @@ and config resume it (the cache is reused), anything else is refused unless
 
 A ``quick`` run (a few epochs of a tiny net) is a smoke test: its report says so at the
 top and every finding's verdict is "smoke test", never agrees / differs / within noise.
+
+Fits are looked up in the run folder's cache, then in the result store
+(:mod:`parknss.experiments.store`; ``store``: a folder or ``off``, default the checkout's
+``results/``), and only the missing ones are fitted and recorded in both, so a study runs
+across several sittings and a report is rebuilt from the store without refitting.
+``refit`` ignores the store's results (and still records the new fits); a quick run reads
+the store but does not write it. The summary's ``sources`` says, per artefact, how many
+fits came from the run cache, from the store and were fitted.
 """
 
 from __future__ import annotations
@@ -21,9 +29,11 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from parknss.executor import Tally
 from parknss.experiments.folds import fold_config
 from parknss.experiments.registry import artefacts, get
 from parknss.experiments.results import RunContext
+from parknss.experiments.store import open_store
 from parknss.nss.config import NSSConfig
 from parknss.outputs import git_revision, run_folder
 from parknss.report.html import write_report
@@ -33,8 +43,10 @@ from parknss.report.html import write_report
 class ReproduceInputs:
     """Artefact ``name`` (or "all"), the ``quick`` budget, the executor settings, the
     campaign ``data`` (None: default), the run folder ``out`` (None:
-    ``runs/reproduce-<UTC stamp>``), the studies' YAML ``config`` (None: shipped) and
-    whether an ``out`` holding something else may be replaced (``overwrite``)."""
+    ``runs/reproduce-<UTC stamp>``), the studies' YAML ``config`` (None: shipped),
+    whether an ``out`` holding something else may be replaced (``overwrite``), the result
+    ``store`` (a folder or "off"; None: $PARKNSS_RESULTS, else the config's ``store.dir``)
+    and whether to ``refit`` what the store holds."""
 
     name: str = "all"
     quick: bool = False
@@ -45,6 +57,8 @@ class ReproduceInputs:
     out: Path | None = None
     config: Path | None = None
     overwrite: bool = False
+    store: str | None = None
+    refit: bool = False
 
 
 def artefact_list() -> str:
@@ -73,6 +87,7 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
         cache_dir=out / "cache",
         config=inputs.config,
     )
+    ctx.store = open_store(inputs.store, ctx.experiments_config(), quick, inputs.refit)
     identity = {
         "artefacts": [a.name for a in chosen],
         "quick": quick,
@@ -91,11 +106,18 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
 def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> dict:
     out, quick = ctx.out_dir, ctx.quick
     sections = []
+    sources: dict[str, dict[str, int]] = {}
     for art in chosen:
         log(f"[reproduce] {art.name}: {art.title}")
         t0 = time.perf_counter()
+        ctx.tally = Tally()
         res = art.make(ctx)
         res.wall_s = time.perf_counter() - t0
+        t = ctx.tally
+        sources[art.name] = {"run_cache": t.cache, "store": t.store, "fitted": t.computed}
+        if t.total:
+            log(f"[reproduce] {art.name}: {t.total} fits: {t.cache} from the run cache, "
+                f"{t.store} from the store, {t.computed} fitted")
         if quick:  # a smoke test supports no verdict (module doc)
             res.findings = [f.smoke_test() for f in res.findings]
         sections.append((art, res))
@@ -107,6 +129,10 @@ def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> d
         "data": str(inputs.data or "bundled"),
         "git_revision": git_revision(),
         "created_utc": stamp,
+        "store": str(ctx.store.root) if ctx.store else None,
+        "store_writes": bool(ctx.store and ctx.store.write),
+        "refit": inputs.refit,
+        "sources": sources,
         "config": {
             "experiments": ctx.experiments_config().model_dump(mode="json"),
             "budget": "quick" if quick else "full",

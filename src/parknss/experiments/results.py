@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from parknss.executor import Tally
+
 
 @dataclass
 class Table:
@@ -70,7 +72,9 @@ class RunContext:
     quick: tiny budgets for smoke tests; executor/workers/address: how sweeps run;
     out_dir: where figures go; data: campaign folder or None for the default campaign;
     config: the studies' YAML (None: configs/experiments.yaml); memo: results shared
-    between artefacts of one run (the config, the measured noise floor).
+    between artefacts of one run (the config, the measured noise floor); store: the result
+    store (:class:`~parknss.experiments.store.ResultStore`, None: none); tally: where the
+    fits came from (run cache, store, fitted).
     """
 
     out_dir: Path
@@ -84,6 +88,8 @@ class RunContext:
     progress: bool = True
     config: Path | None = None
     memo: dict[str, Any] = field(default_factory=dict)
+    store: Any = None
+    tally: Tally = field(default_factory=Tally)
     _campaign: Any = None
 
     def campaign(self):
@@ -113,6 +119,8 @@ class RunContext:
             cache_dir=self.cache_dir,
             data=str(self.data) if self.data is not None else None,
             progress=self.progress,
+            store=self.store,
+            tally=self.tally,
         )
 
 

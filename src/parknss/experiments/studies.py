@@ -2,7 +2,9 @@
 
 :func:`run_study` runs one of :data:`STUDIES` (``quick``: the smoke-test budget of
 configs/experiments.yaml) through the executor (``executor`` local or ray, ``workers``,
-``address``) with a result cache in ``<out>/cache``, so an interrupted study resumes; it
+``address``) with a result cache in ``<out>/cache``, so an interrupted study resumes, and
+the result store behind it (:mod:`parknss.experiments.store`: ``store`` a folder or "off",
+``refit`` ignores its results; a quick run does not write it); it
 writes ``<name>.json`` and the study's figure to ``out`` and returns a :class:`StudyRun`
 (the JSON document and the report tables; :func:`study_text` prints them). Studies that
 judge effects against the seed-noise floor take it from ``floor``: ``measure`` (run the
@@ -75,8 +77,9 @@ def _floor(spec: str, cfg, quick: bool, sweep, log: Callable[[str], None]):
 class StudyInputs:
     """One study: its ``name`` (one of :data:`STUDIES`), the ``quick`` budget, the folder
     ``out`` (and cache), the executor settings, the campaign ``data`` (None: default), the
-    experiments YAML ``config`` (None: shipped), the noise ``floor`` spec and whether an
-    ``out`` holding something else may be replaced (``overwrite``)."""
+    experiments YAML ``config`` (None: shipped), the noise ``floor`` spec, whether an
+    ``out`` holding something else may be replaced (``overwrite``), the result ``store``
+    (a folder or "off"; None: $PARKNSS_RESULTS, else the config's) and ``refit``."""
 
     name: str
     out: Path
@@ -89,6 +92,8 @@ class StudyInputs:
     floor: str = "measure"
     progress: bool = True
     overwrite: bool = False
+    store: str | None = None
+    refit: bool = False
 
     def identity(self, cfg) -> dict:
         """What decides the results (the run folder's manifest; not the study, so the
@@ -113,9 +118,11 @@ class StudyRun:
 
 def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> StudyRun:
     """Run one study; write its JSON and figure to ``out`` (see the module doc)."""
+    from parknss.executor import Tally
     from parknss.experiments import findings as fnd
     from parknss.experiments import study_tables as st
     from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.store import open_store
     from parknss.experiments.sweep import Sweep
     from parknss.report import study_figures as fig
 
@@ -128,8 +135,10 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
         log(note)
     with run_folder(out, command="parknss study", args=inputs.identity(cfg),
                     overwrite=inputs.overwrite) as run:
+        tally = Tally()
         sweep = Sweep(inputs.executor, inputs.workers, inputs.address, out / "cache",
-                      str(data) if data else None, inputs.progress)
+                      str(data) if data else None, inputs.progress,
+                      open_store(inputs.store, cfg, quick, inputs.refit), tally)
         floor = inputs.floor
         t0 = time.perf_counter()
         if name == "learning-curve":
@@ -175,6 +184,7 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
             "quick": quick,
             "executor": inputs.executor,
             "wall_s": round(time.perf_counter() - t0, 2),
+            "sources": {"run_cache": tally.cache, "store": tally.store, "fitted": tally.computed},
             "result": res.to_json(),
             "findings": [
                 {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
@@ -184,6 +194,8 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
             "stratified": stratified,
             "note": note,
         }
+        log(f"{name}: {tally.total} fits: {tally.cache} from the run cache, {tally.store} "
+            f"from the store, {tally.computed} fitted")
         doc["json"] = str(run.write_json(f"{name}.json", doc, default=str))
         run.manifest["studies"] = sorted({*run.manifest.get("studies", []), name})
     return StudyRun(doc, tables)

@@ -2,7 +2,9 @@
 
 A study is a list of :func:`parknss.experiments.folds.fold_job` jobs run through the
 executor (local pool, in-process or Ray; cached under the job hash, so an interrupted study
-resumes). :class:`Sweep` carries the executor settings and the campaign; :class:`FoldScore`
+resumes; and looked up in the result store, :mod:`parknss.experiments.store`, when one is
+given). :class:`Sweep` carries the executor settings, the campaign, the store and the
+tally of where the results came from; :class:`FoldScore`
 is the slice of a fold's JSON result the studies tabulate (moving-region MSEs in the
 paper's units against the logged channels, and against the noise-free truth when the
 campaign is synthetic).
@@ -18,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from parknss.config import override
-from parknss.executor import Job, run_jobs
+from parknss.executor import Job, Store, Tally, run_jobs
 from parknss.experiments.config import Overrides
 from parknss.nss.config import NSSConfig
 
@@ -27,7 +29,9 @@ FOLD_JOB = "parknss.experiments.folds:fold_job"
 
 @dataclass
 class Sweep:
-    """Executor settings and the campaign folder (None: the default campaign)."""
+    """Executor settings, the campaign folder (None: the default campaign), the result
+    store (None: none) and the tally that counts results from the cache, the store and
+    fitted."""
 
     executor: str = "local"
     workers: int | None = None
@@ -35,6 +39,8 @@ class Sweep:
     cache_dir: Path | None = None
     data: str | None = None
     progress: bool = True
+    store: Store | None = None
+    tally: Tally | None = None
 
     def run(self, jobs: list[Job], desc: str) -> list[Any]:
         """Results of ``jobs`` in order (cached jobs are read, not recomputed; identical
@@ -50,6 +56,8 @@ class Sweep:
             address=self.address,
             progress=self.progress,
             desc=desc,
+            store=self.store,
+            tally=self.tally,
         )
         by_key = dict(zip(unique, results, strict=True))
         return [by_key[job.key()] for job in jobs]

@@ -1,0 +1,334 @@
+"""The result store: every study fit's scores, kept in the repository as small JSON files.
+
+A fit (an executor :class:`~parknss.executor.Job`, e.g. a
+:func:`~parknss.experiments.folds.fold_job`) is stored under a key that hashes three
+things: the job (its function and the keyword arguments that decide its numbers, see
+:func:`key_kwargs`), the **data hash** of the campaign it reads
+(:meth:`parknss.data.trial.Campaign.data_hash`, once per campaign and store) and the
+**training code version** (:func:`code_version`: a hash of the files in
+:data:`CODE_FILES`, the code and the shipped NSS config that decide a fit's numbers).
+A changed campaign or an edited training file therefore misses, and the fit runs again.
+
+Layout: ``<store>/<function>/<key>.json``, one :class:`StoreEntry` per fit: the key, the
+job, the data hash, the code version, the job's JSON result (scores; never weights) and
+its :class:`Provenance` (git revision, the resolved NSS config, machine, Python and torch
+versions, wall and CPU time, when it finished). Files are written atomically.
+
+Where it is (:func:`store_dir`): ``--store DIR`` (or ``off``), else the environment variable
+``PARKNSS_RESULTS``, else ``store.dir`` of configs/experiments.yaml: ``auto`` is the
+checkout's ``results/`` (beside ``src/``), off when parknss runs from an installed wheel.
+``parknss reproduce`` and ``parknss study`` read the run folder's cache, then the store,
+then fit (:func:`open_store`: ``refit`` skips store hits but still writes; ``--quick`` runs
+read but do not write, unless ``store.write_quick``). A store file that does not parse or
+does not match its key is ignored with a one-line warning and refitted (overwritten);
+``parknss results verify`` reports such files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from parknss.config import PACKAGE_DIR, REPO_ROOT
+from parknss.errors import ConfigError
+from parknss.executor import Job
+
+ENV_VAR = "PARKNSS_RESULTS"
+OFF = "off"
+AUTO = "auto"
+
+CODE_FILES: tuple[str, ...] = (
+    "nss/*.py",  # the model, the fused engine, losses, training, limiter, linear baseline
+    "data/trial.py",  # trials and campaigns
+    "data/normalize.py",  # the normalizers
+    "data/windows.py",  # the training windows
+    "data/splits.py",  # which trials a fold trains and scores on
+    "metrics/errors.py",  # the scores
+    "signals.py",  # units, the blind zone, the MSE factors
+    "vehicle.py",  # the kinematic prior of the residual yaw readout
+    "experiments/folds.py",  # the fold job
+    "experiments/limiter_study.py",  # the limiter job
+    "configs/nss.yaml",  # the NSS config every fold job starts from
+)
+"""The training code: files (globs) under ``src/parknss/`` whose edits change a fit's
+numbers. Editing any of them changes :func:`code_version`, so every stored fit misses."""
+
+KEY_IGNORED: tuple[str, ...] = ("data", "save_dir", "progress")
+"""Job arguments that do not decide its numbers: the campaign folder (its content is the
+data hash), where a model is saved, the progress bar."""
+
+
+def code_files(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES) -> list[Path]:
+    """The files of :data:`CODE_FILES` under ``root``, sorted."""
+    files = {p for pat in patterns for p in root.glob(pat) if p.is_file()}
+    return sorted(files)
+
+
+def code_version(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES) -> str:
+    """Hash of the training code (the relative paths and bytes of :func:`code_files`)."""
+    h = hashlib.sha256()
+    for p in code_files(root, patterns):
+        h.update(p.relative_to(root).as_posix().encode() + b"\0")
+        h.update(p.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+def _file_digest(path: str | Path) -> str:
+    try:
+        return "sha256:" + hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the job's config ({exc.strerror})") from exc
+
+
+def key_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """The arguments that decide a job's numbers: :data:`KEY_IGNORED` dropped, a ``config``
+    file named by the hash of its content."""
+    out = {k: v for k, v in kwargs.items() if k not in KEY_IGNORED}
+    if out.get("config") is not None:
+        out["config"] = _file_digest(out["config"])
+    return out
+
+
+def store_key(fn: str, kwargs: Mapping[str, Any], data_hash: str, code: str) -> str:
+    """The store key of a job (``kwargs`` from :func:`key_kwargs`)."""
+    doc = {"fn": fn, "kwargs": kwargs, "data_hash": data_hash, "code_version": code}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:24]
+
+
+def short_name(fn: str) -> str:
+    """The store folder of a job function: ``"pkg.mod:fold_job"`` -> ``"fold_job"``."""
+    return fn.rpartition(":")[2] or fn
+
+
+@dataclass
+class Machine:
+    platform: str
+    cpu: str
+    cores: int
+
+    @classmethod
+    def here(cls) -> Machine:
+        cpu = platform.processor()
+        try:
+            for line in Path("/proc/cpuinfo").read_text().splitlines():
+                if line.startswith("model name"):
+                    cpu = line.partition(":")[2].strip()
+                    break
+        except OSError:
+            pass
+        return cls(platform.platform(), cpu or "unknown", os.cpu_count() or 1)
+
+
+@dataclass
+class Provenance:
+    """Where and how a stored result was computed."""
+
+    git_revision: str
+    dirty: bool
+    machine: Machine
+    python: str
+    torch: str
+    wall_s: float
+    cpu_s: float
+    finished_utc: str
+    data: str | None
+    config: dict | None
+
+
+@dataclass
+class StoreEntry:
+    """One stored fit (one JSON file)."""
+
+    key: str
+    fn: str
+    kwargs: dict[str, Any]
+    name: str
+    data_hash: str
+    code_version: str
+    result: Any
+    provenance: Provenance
+
+    def to_json(self) -> dict:
+        doc = asdict(self)
+        doc["job"] = {"fn": doc.pop("fn"), "kwargs": doc.pop("kwargs"), "name": doc.pop("name")}
+        return doc
+
+    @classmethod
+    def from_json(cls, doc: dict) -> StoreEntry:
+        job, prov = doc["job"], dict(doc["provenance"])
+        prov["machine"] = Machine(**prov["machine"])
+        return cls(doc["key"], job["fn"], job["kwargs"], job.get("name", ""), doc["data_hash"],
+                   doc["code_version"], doc["result"], Provenance(**prov))
+
+    def expected_key(self) -> str:
+        return store_key(self.fn, self.kwargs, self.data_hash, self.code_version)
+
+
+def _warn(msg: str) -> None:
+    print(f"parknss: warning: {msg}", file=sys.stderr)
+
+
+def _nss_config(kwargs: Mapping[str, Any]) -> dict | None:
+    """The resolved NSS config of a fold-like job (None for other jobs)."""
+    if "overrides" not in kwargs:
+        return None
+    from parknss.experiments.folds import fold_config
+
+    return fold_config(kwargs.get("config"), kwargs.get("overrides")).model_dump(mode="json")
+
+
+class ResultStore:
+    """The store at ``root`` (see the module doc); ``read``/``write`` switch the lookup and
+    the recording off (``refit``, quick runs). Implements :class:`parknss.executor.Store`."""
+
+    def __init__(self, root: str | Path, read: bool = True, write: bool = True,
+                 log: Callable[[str], None] = _warn) -> None:
+        self.root = Path(root)
+        self.read, self.write, self.log = read, write, log
+        self.code = code_version()
+        self._data_hashes: dict[str | None, str] = {}
+        self._revision: str | None = None
+
+    def data_hash(self, data: str | None) -> str:
+        """The data hash of the campaign ``data`` (None: the default), computed once."""
+        if data not in self._data_hashes:
+            from parknss.nss.campaigns import load_campaign
+
+            self._data_hashes[data] = load_campaign(data).data_hash()
+        return self._data_hashes[data]
+
+    def entry_key(self, job: Job) -> tuple[str, dict, str]:
+        """(key, key arguments, data hash) of ``job``."""
+        kw, dh = key_kwargs(job.kwargs), self.data_hash(job.kwargs.get("data"))
+        return store_key(job.fn, kw, dh, self.code), kw, dh
+
+    def path(self, job: Job) -> Path:
+        return self.root / short_name(job.fn) / f"{self.entry_key(job)[0]}.json"
+
+    def get(self, job: Job) -> tuple[bool, Any]:
+        if not self.read:
+            return False, None
+        key = self.entry_key(job)[0]
+        p = self.root / short_name(job.fn) / f"{key}.json"
+        if not p.is_file():
+            return False, None
+        try:
+            entry = StoreEntry.from_json(json.loads(p.read_text()))
+            ok = entry.key == key == entry.expected_key()
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.log(f"{p}: not a store entry ({exc.__class__.__name__}); ignored, refitting")
+            return False, None
+        if not ok:
+            self.log(f"{p}: its contents do not match its key; ignored, refitting")
+            return False, None
+        return True, entry.result
+
+    def put(self, job: Job, result: Any, wall_s: float, cpu_s: float) -> None:
+        if not self.write:
+            return
+        key, kw, dh = self.entry_key(job)
+        if self._revision is None:
+            from parknss.outputs import git_revision
+
+            self._revision = git_revision()
+        import torch
+
+        rev = self._revision
+        prov = Provenance(
+            git_revision=rev.removesuffix("+dirty"), dirty=rev.endswith("+dirty"),
+            machine=Machine.here(), python=platform.python_version(), torch=torch.__version__,
+            wall_s=round(wall_s, 3), cpu_s=round(cpu_s, 3),
+            finished_utc=datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+            data=job.kwargs.get("data"), config=_nss_config(job.kwargs),
+        )
+        entry = StoreEntry(key, job.fn, kw, job.name, dh, self.code, result, prov)
+        p = self.root / short_name(job.fn) / f"{key}.json"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        tmp = p.with_suffix(f".{os.getpid()}.tmp")  # two runs may store the same fit
+        tmp.write_text(json.dumps(entry.to_json(), indent=1, sort_keys=True) + "\n")
+        tmp.replace(p)
+
+
+def store_dir(option: str | Path | None, setting: str = AUTO,
+              env: Mapping[str, str] = os.environ) -> Path | None:
+    """Where the store is: ``option`` (``--store``), else ``$PARKNSS_RESULTS``, else the
+    config's ``setting``; ``off`` is none, ``auto`` the checkout's ``results/`` (none when
+    parknss runs from an installed wheel, which has no checkout)."""
+    spec = str(option) if option is not None else env.get(ENV_VAR) or setting
+    if spec == OFF:
+        return None
+    if spec == AUTO:
+        checkout = (REPO_ROOT / "src" / "parknss").resolve() == PACKAGE_DIR
+        return REPO_ROOT / "results" if checkout else None
+    return Path(spec)
+
+
+def open_store(option: str | Path | None, cfg, quick: bool, refit: bool,
+               log: Callable[[str], None] = _warn) -> ResultStore | None:
+    """The store of a study run (None when off): ``cfg`` is the
+    :class:`~parknss.experiments.config.ExperimentsConfig` (``store`` section); ``refit``
+    skips its hits; a ``quick`` run does not write unless ``store.write_quick``."""
+    root = store_dir(option, cfg.store.dir)
+    if root is None:
+        return None
+    return ResultStore(root, read=not refit, write=not quick or cfg.store.write_quick, log=log)
+
+
+def entries(root: str | Path) -> list[tuple[Path, StoreEntry | str]]:
+    """Every ``*.json`` under the store ``root`` with its entry, or why it is not a valid
+    one (does not parse, lacks a field, its key does not match its contents or path)."""
+    root = Path(root)
+    out: list[tuple[Path, StoreEntry | str]] = []
+    for p in sorted(root.glob("*/*.json")):
+        try:
+            e = StoreEntry.from_json(json.loads(p.read_text()))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            out.append((p, f"not a store entry ({exc.__class__.__name__}: {exc})"))
+            continue
+        if e.key != e.expected_key():
+            out.append((p, f"key {e.key} does not match its contents ({e.expected_key()})"))
+        elif p.stem != e.key or p.parent.name != short_name(e.fn):
+            out.append((p, f"misplaced: belongs at {short_name(e.fn)}/{e.key}.json"))
+        else:
+            out.append((p, e))
+    return out
+
+
+def results_root(option: str | Path | None, config: Path | None = None) -> Path:
+    """The store ``parknss results`` reads (:func:`store_dir` with the experiments config
+    ``config``); a one-line ConfigError when there is none or it is not a folder."""
+    from parknss.experiments.config import load_experiments_config
+
+    root = store_dir(option, load_experiments_config(config).store.dir)
+    if root is None:
+        raise ConfigError("no result store (off, or no checkout): name one with --store DIR "
+                          f"or ${ENV_VAR}")
+    if not root.is_dir():
+        raise ConfigError(f"{root}: no result store there (not a folder)")
+    return root
+
+
+def listing(root: Path) -> tuple[list[str], list[str]]:
+    """(one line per valid entry, one line per invalid file) of the store at ``root``;
+    an entry of another code version than this checkout's is marked ``stale``."""
+    current = code_version()
+    rows, bad = [], []
+    for p, e in entries(root):
+        if isinstance(e, str):
+            bad.append(f"{p.relative_to(root)}: {e}")
+            continue
+        pv = e.provenance
+        state = "current" if e.code_version == current else "stale"
+        rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
+                    f"code {e.code_version} {state:7s}  {pv.git_revision[:10]}"
+                    f"{'+dirty' if pv.dirty else ''}  wall {pv.wall_s:.1f} s cpu {pv.cpu_s:.1f} s"
+                    f"  {pv.finished_utc}")
+    return rows, bad

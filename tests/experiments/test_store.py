@@ -1,0 +1,205 @@
+"""The result store (parknss.experiments.store): keys, code version, where it is, and
+``parknss study``/``reproduce``/``results`` reading and writing it, on a tiny campaign."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from parknss.cli import main
+from parknss.config import PACKAGE_DIR, REPO_ROOT
+from parknss.executor import Job, Tally, run_jobs
+from parknss.experiments.config import load_experiments_config
+from parknss.experiments.store import (
+    CODE_FILES,
+    ResultStore,
+    code_files,
+    code_version,
+    entries,
+    open_store,
+    store_dir,
+)
+from parknss.experiments.studies import StudyInputs, run_study
+
+PROBE = "parknss.experiments.probe:probe_fit"
+
+
+def _store(root: Path, data_hash: str = "d0", **kw) -> ResultStore:
+    store = ResultStore(root, log=lambda msg: None, **kw)
+    store._data_hashes[None] = data_hash  # the probe reads no campaign
+    return store
+
+
+def _job(seed: int = 0) -> Job:
+    return Job(PROBE, {"seed": seed, "steps": 20}, name=f"probe {seed}")
+
+
+def test_code_version_follows_the_listed_files_only(tmp_path):
+    for pattern in CODE_FILES:  # a renamed file must be renamed in the list too
+        assert list(PACKAGE_DIR.glob(pattern)), pattern
+    for p in code_files():
+        dst = tmp_path / p.relative_to(PACKAGE_DIR)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(p, dst)
+    assert code_version(tmp_path) == code_version()
+    (tmp_path / "experiments" / "findings.py").write_text("# not training code\n")
+    (tmp_path / "sim").mkdir()
+    (tmp_path / "sim" / "grid.py").write_text("x = 1\n")
+    assert code_version(tmp_path) == code_version()
+    with (tmp_path / "nss" / "losses.py").open("a") as f:
+        f.write("\n# an edit\n")
+    assert code_version(tmp_path) != code_version()
+
+
+def test_where_the_store_is(tmp_path):
+    assert store_dir(None, "auto", env={}) == REPO_ROOT / "results"  # the checkout's
+    assert store_dir(None, "auto", env={"PARKNSS_RESULTS": str(tmp_path)}) == tmp_path
+    assert store_dir(None, "auto", env={"PARKNSS_RESULTS": "off"}) is None
+    assert store_dir(str(tmp_path), "off", env={"PARKNSS_RESULTS": "off"}) == tmp_path
+    assert store_dir("off", "auto", env={}) is None
+    cfg = load_experiments_config()
+    assert cfg.store.dir == "auto" and not cfg.store.write_quick
+    quick = open_store(tmp_path, cfg, quick=True, refit=False)
+    assert quick.read and not quick.write  # quick runs read the store, never write it
+    refit = open_store(tmp_path, cfg, quick=False, refit=True)
+    assert refit.write and not refit.read
+
+
+def test_lookup_order_tally_and_misses(tmp_path):
+    jobs = [_job(0), _job(1)]
+    store = _store(tmp_path / "store")
+    tally = Tally()
+    first = run_jobs(jobs, workers=1, progress=False, cache_dir=tmp_path / "c1", store=store,
+                     tally=tally)
+    assert tally.to_json() == {"cache": 0, "store": 0, "computed": 2}
+    assert len(list((tmp_path / "store" / "probe_fit").glob("*.json"))) == 2
+    tally = Tally()
+    again = run_jobs([*jobs, _job(2)], workers=1, progress=False, cache_dir=tmp_path / "c1",
+                     store=store, tally=tally)
+    assert again[:2] == first and tally.to_json() == {"cache": 2, "store": 0, "computed": 1}
+    tally = Tally()  # a new run folder: from the store
+    again = run_jobs(jobs, workers=1, progress=False, cache_dir=tmp_path / "c2", store=store,
+                     tally=tally)
+    assert again == first and tally.to_json() == {"cache": 0, "store": 2, "computed": 0}
+    # another campaign or another training code: every stored fit misses
+    assert not _store(tmp_path / "store", data_hash="d1").get(jobs[0])[0]
+    other_code = _store(tmp_path / "store")
+    other_code.code = "0123456789abcdef"
+    assert not other_code.get(jobs[0])[0]
+    # a refit ignores the stored result but records the new one
+    assert not _store(tmp_path / "store", read=False).get(jobs[0])[0]
+
+
+def test_entry_is_plain_json_with_provenance(tmp_path):
+    store = _store(tmp_path)
+    job = Job(PROBE, {"seed": 3, "steps": 20, "save_dir": "/elsewhere", "progress": False})
+    res = {"a": 0.5, "seed": 3}
+    store.put(job, res, wall_s=1.25, cpu_s=1.0)
+    ((path, entry),) = entries(tmp_path)
+    assert entry.key == path.stem
+    doc = json.loads(path.read_text())
+    assert doc["key"] == path.stem and doc["result"] == res
+    assert doc["job"] == {"fn": PROBE, "kwargs": {"seed": 3, "steps": 20}, "name": ""}
+    assert doc["data_hash"] == "d0" and doc["code_version"] == code_version()
+    prov = doc["provenance"]
+    assert {"git_revision", "dirty", "machine", "python", "torch", "wall_s", "cpu_s",
+            "finished_utc", "config"} <= set(prov)
+    assert prov["wall_s"] == 1.25 and prov["cpu_s"] == 1.0 and prov["machine"]["cores"] >= 1
+    # where a model was saved does not decide the scores: the same key
+    assert store.get(Job(PROBE, {"seed": 3, "steps": 20}))[0]
+
+
+def test_corrupt_file_is_ignored_with_a_warning_and_refitted(tmp_path, capsys):
+    store = ResultStore(tmp_path)
+    store._data_hashes[None] = "d0"
+    job = _job(0)
+    run_jobs([job], workers=1, progress=False, store=store)
+    path = store.path(job)
+    path.write_text('{"key": "abc", "res')
+    tally = Tally()
+    (res,) = run_jobs([job], workers=1, progress=False, store=store, tally=tally)
+    err = capsys.readouterr().err
+    assert "not a store entry" in err and "refitting" in err and len(err.splitlines()) == 1
+    assert tally.computed == 1 and json.loads(path.read_text())["result"] == res
+    path.write_text('{"key": "abc", "res')
+    assert main(["results", "verify", "--store", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    assert "INVALID probe_fit/" in captured.out
+    assert len(captured.err.strip().splitlines()) == 1 and "not valid store entries" in captured.err
+
+
+def _study(data: Path, cfg: Path, out: Path, store: Path, **kw) -> dict:
+    inputs = StudyInputs(name="seed-noise", out=out, data=data, config=cfg, workers=1,
+                         progress=False, store=str(store), **kw)
+    return run_study(inputs).doc
+
+
+def test_a_study_runs_again_from_the_store(tmp_path, tiny_study, capsys):
+    data, cfg = tiny_study
+    store = tmp_path / "results"
+    first = _study(data, cfg, tmp_path / "a", store)
+    n = first["sources"]["fitted"]
+    assert n == 3 and first["sources"]["store"] == 0
+    second = _study(data, cfg, tmp_path / "b", store)  # another sitting, another folder
+    assert second["sources"] == {"run_cache": 0, "store": n, "fitted": 0}
+    assert second["result"] == first["result"] and second["findings"] == first["findings"]
+    refit = _study(data, cfg, tmp_path / "c", store, refit=True)
+    assert refit["sources"] == {"run_cache": 0, "store": 0, "fitted": n}
+    assert len(list((store / "fold_job").glob("*.json"))) == n  # overwritten, not added
+    assert main(["results", "verify", "--store", str(store)]) == 0
+    assert f"{n} fits in {store}: all valid" in capsys.readouterr().out
+    assert main(["results", "list", "--store", str(store), "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert len(listed["entries"]) == n and all(" current " in e for e in listed["entries"])
+    entry = entries(store)[0][1]
+    assert entry.provenance.config["model"]["state_units"] == 4  # the resolved NSS config
+    assert entry.data_hash and entry.provenance.data == str(data)
+
+
+def test_reproduce_reads_the_store_and_quick_runs_do_not_write(tmp_path, tiny_study, capsys):
+    data, cfg = tiny_study
+    store = tmp_path / "results"
+    base = ["reproduce", "seed_noise", "--workers", "1", "--data", str(data), "--config",
+            str(cfg), "--store", str(store), "--json"]
+    assert main([*base, "--quick", "--out", str(tmp_path / "q")]) == 0
+    quick = json.loads(capsys.readouterr().out)
+    assert not store.exists() and quick["store_writes"] is False
+    assert quick["sources"]["seed_noise"]["fitted"] == 2
+    assert main([*base, "--out", str(tmp_path / "a")]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["sources"]["seed_noise"] == {"run_cache": 0, "store": 0, "fitted": 3}
+    assert main([*base, "--out", str(tmp_path / "b")]) == 0
+    captured = capsys.readouterr()
+    second = json.loads(captured.out)
+    assert second["sources"]["seed_noise"] == {"run_cache": 0, "store": 3, "fitted": 0}
+    assert "3 from the store, 0 fitted" in captured.err
+    assert second["verdicts"] == first["verdicts"]
+    run_json = json.loads((tmp_path / "b" / "run.json").read_text())
+    assert run_json["sources"]["seed_noise"]["store"] == 3
+    assert main([*base, "--out", str(tmp_path / "c"), "--refit"]) == 0
+    assert json.loads(capsys.readouterr().out)["sources"]["seed_noise"]["fitted"] == 3
+
+
+@pytest.mark.parametrize("argv", [["results", "list", "--store", "off"]])
+def test_no_store_is_one_line(argv, capsys):
+    assert main(argv) == 2
+    assert "no result store" in capsys.readouterr().err
+
+
+def test_table2_from_the_store_notes_the_missing_fold_model(tmp_path, tiny_study, capsys):
+    data, cfg = tiny_study
+    base = ["reproduce", "table2", "--workers", "1", "--data", str(data), "--config", str(cfg),
+            "--store", str(tmp_path / "results"), "--json"]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 0
+    first = json.loads(capsys.readouterr().out)
+    n = first["sources"]["table2"]["fitted"]
+    assert n > 0 and "fig5_rollouts.png" in first["files"]
+    shutil.rmtree(tmp_path / "a")  # the fold models are gone; the store keeps no weights
+    assert main([*base, "--out", str(tmp_path / "b")]) == 0
+    second = json.loads(capsys.readouterr().out)
+    assert second["sources"]["table2"] == {"run_cache": 0, "store": n, "fitted": 0}
+    assert "fig5_rollouts.png" not in second["files"]
+    assert "Fig. 5 is not drawn" in (tmp_path / "b" / "report.html").read_text()
