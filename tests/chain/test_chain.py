@@ -5,6 +5,7 @@ artefacts, and the Plant protocol."""
 from __future__ import annotations
 
 import json
+import math
 import shutil
 
 import numpy as np
@@ -212,3 +213,29 @@ def test_real_time_step_is_fast_enough_to_be_measured(setup):
     for _ in range(200):
         out = dep.step(Commands(1, 30.0, -0.1, 10.0))
     assert np.isfinite(out.vx)
+
+
+def test_brake_hold_latch_holds_a_car_at_rest_in_closed_loop_only(setup):
+    """Under a full brake-hold inside the blind zone the Plant (gear rule, closed loop) is
+    set to rest exactly and stays there until the brake is released; a replay
+    (gear_rule=False) leaves the NSS as it is (actuators/envelopes.py, the latch)."""
+    camp, nss, _, env, cmd_models, _ = setup
+    assert math.isfinite(env.hold_latch_bar) and env.hold_latch_bar > 0
+    chain = make_chain(nss, cmd_models, env)
+    plant = DeployedChain(chain)
+    replay = RealtimeChain(chain.nss, chain.models(), chain.envelope, gear_rule=False)
+    v_plant, v_replay = [], []
+    for rt, out in ((plant.rt, v_plant), (replay, v_replay)):
+        rt.start([0.1, 0.0], [0.0, 0.0, 0.0], [1, 0.0, 0.0, 0.0])
+        for _ in range(300):  # 3 s of the strongest decel request
+            act, st = rt.step(1, 0.0, env.cmd_lo[1], 0.0)
+            out.append((act[1], st[0]))
+    p = np.array([a for a, _ in v_plant])
+    vx = np.array([v for _, v in v_plant])
+    assert p.max() >= env.hold_latch_bar  # the brake reaches the latch pressure
+    k = int(np.argmax((p >= env.hold_latch_bar) & (np.abs(vx) < 0.5 / 3.6)))
+    assert np.all(np.abs(vx[k + 2:]) < 1e-12)  # held at rest from the next sample on
+    assert np.max(np.abs([v for _, v in v_replay][k + 2:])) > 1e-6  # the replay is not
+    for _ in range(200):  # release the brake and drive: the latch lets go
+        _, st = plant.rt.step(1, float(env.cmd_hi[0]), 0.0, 0.0)
+    assert abs(st[0]) > 0.05

@@ -46,6 +46,12 @@ class EnvelopeConfig(StrictModel):
     shift_time_s: float = Field(
         0.25, ge=0.0, description="gear rule: standstill time before a new gear engages, s"
     )
+    hold_latch: bool = Field(
+        True, description="closed loop: a brake at or above the highest pressure the car was "
+        "seen moving at holds a car inside the blind zone at rest")
+    hold_latch_kmh: float = Field(
+        0.5, ge=0.0, description="brake-hold latch: |vx| below this (the wheel-speed blind "
+        "zone, where the NSS loss does not look) is held at rest, km/h")
 
 
 class FitConfig(StrictModel):

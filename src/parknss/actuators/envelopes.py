@@ -14,6 +14,15 @@ Input side, on the commands before the submodels:
   engaged only after ``shift_time_s`` at |vx| <= ``shift_speed_kmh``, the drive command
   zero while it waits): :mod:`parknss.actuators.shift`, applied by the chain, which has
   the speed it needs.
+* the brake-hold latch (closed loop only, with the gear rule): the NSS is not taught
+  inside the wheel-speed blind zone (its loss masks |vx| < 0.5 km/h, where the sensor
+  reads 0), so under a brake-hold its vx settles near, not at, 0 (a few cm/s) and a
+  standstill that the gear rule and the interface must see never comes. A brake holds:
+  once the pressure reaches ``hold_latch_bar`` (identified: the highest pressure the car
+  was logged moving at, above the blind zone) with |vx| inside ``hold_latch_kmh``, the
+  state is set to rest (vx 0, yaw rate 0) after the step, until the pressure falls below
+  it. Replays of logs do not apply it (the logged gear and actuals already carry the
+  car's behaviour; :mod:`parknss.chain.model`).
 
 Output side, on the submodel outputs (never on measured channels): torque and pressure
 are held at their floors (>= 0), the steering angle is rate-limited to just above the
@@ -42,7 +51,7 @@ from parknss.actuators.config import EnvelopeConfig
 from parknss.actuators.shift import ShiftByWire
 from parknss.data.trial import Trial
 from parknss.errors import CheckpointError, DataError
-from parknss.signals import DT
+from parknss.signals import DT, kmh_to_ms
 
 CMD_NAMES: tuple[str, ...] = ("torque_cmd", "decel_cmd", "steer_cmd")
 
@@ -62,9 +71,13 @@ class Envelope:
     steer_rate_dps: float = 1.0e9
     shift_speed_kmh: float = 0.1
     shift_time_s: float = 0.25
+    hold_latch_bar: float = math.inf
+    hold_latch_kmh: float = 0.5
 
     def to_json(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        d["hold_latch_bar"] = None if math.isinf(self.hold_latch_bar) else self.hold_latch_bar
+        return d
 
     @classmethod
     def from_json(cls, d: dict) -> Envelope:
@@ -75,12 +88,22 @@ class Envelope:
                 float(d["steer_lock"]), float(d["steer_rate_dps"]),
                 float(d.get("shift_speed_kmh", cls.shift_speed_kmh)),
                 float(d.get("shift_time_s", cls.shift_time_s)),
+                math.inf if d.get("hold_latch_bar") is None else float(d["hold_latch_bar"]),
+                float(d.get("hold_latch_kmh", cls.hold_latch_kmh)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"invalid envelope ({exc})") from exc
         if not (env.shift_speed_kmh >= 0.0 and env.shift_time_s >= 0.0):
             raise CheckpointError("invalid envelope (negative or NaN gear-shift rule)")
+        if not (env.hold_latch_bar >= 0.0 and env.hold_latch_kmh >= 0.0):
+            raise CheckpointError("invalid envelope (negative or NaN brake-hold latch)")
         return env
+
+    def held(self, pressure: float, vx: float) -> bool:
+        """The brake-hold latch (module doc): the brake holds the car at rest when its
+        pressure (bar) reaches ``hold_latch_bar`` and |vx| (m/s) is inside the blind zone
+        ``hold_latch_kmh``."""
+        return pressure >= self.hold_latch_bar and abs(vx) < kmh_to_ms(self.hold_latch_kmh)
 
     def shift_rule(self, dt: float = DT) -> ShiftByWire:
         """A fresh :class:`~parknss.actuators.shift.ShiftByWire` with this envelope's rule."""
@@ -102,9 +125,16 @@ def identify_envelope(trials: Sequence[Trial], cfg: EnvelopeConfig) -> Envelope:
     s_lo, s_hi = max(s_lo, -lock), min(s_hi, lock)
     d_lo, d_hi = cfg.decel_domain_ms2
     slew = max(float(np.max(np.abs(np.diff(tr["steer"])))) / DT for tr in trials if tr.n > 1)
+    latch = math.inf
+    if cfg.hold_latch:  # the highest pressure the car was seen moving at (above the zone)
+        v_edge = kmh_to_ms(cfg.hold_latch_kmh)
+        moving = [tr["brake_pressure"][np.abs(tr["vx"]) >= v_edge] for tr in trials]
+        p = np.concatenate(moving) if moving else np.zeros(0)
+        latch = float(np.max(p)) if p.size else math.inf
     return Envelope(
         (t_lo, d_lo, s_lo), (t_hi, d_hi, s_hi), cfg.torque_floor_nm, cfg.pressure_floor_bar,
         lock, cfg.steer_rate_margin * slew, cfg.max_shift_speed_kmh, cfg.shift_time_s,
+        latch, cfg.hold_latch_kmh,
     )
 
 

@@ -46,7 +46,7 @@ from parknss.actuators.steppers import (
 from parknss.chain.realtime import RealtimeChain
 from parknss.errors import CheckpointError
 from parknss.nss.nets import NumpyLayers
-from parknss.signals import DT
+from parknss.signals import DT, kmh_to_ms
 
 OUTPUTS: tuple[str, ...] = (
     "torque", "brake_pressure", "steer", "vx", "yaw_rate", "ax", "ay", "gear",
@@ -287,6 +287,7 @@ def chain_c_source(rt: RealtimeChain, name: str = "parknss chain") -> CSource:
         "STEER_STEP": env.steer_rate_dps * DT, "STEER_LOCK": env.steer_lock,
         "TORQUE_FLOOR": env.torque_floor, "PRESSURE_FLOOR": env.pressure_floor,
         "SHIFT_SPEED": rule.max_speed if rule else math.inf,
+        "LATCH_BAR": env.hold_latch_bar, "LATCH_SPEED": kmh_to_ms(env.hold_latch_kmh),
     }
     vecs = {
         "CMD_LO": env.cmd_lo, "CMD_HI": env.cmd_hi, "IN_OFF": nss.in_off, "IN_SC": nss.in_sc,
@@ -407,10 +408,10 @@ static double pk_yaw(const double *x, double steer_s, double *phys) {{
     return ys;
 }}
 
-static void pk_initial(pk_chain *s, const double *us) {{
+static void pk_set_state(pk_chain *s, const double x0[2], const double *us) {{
     double x0s[2];
     for (int i = 0; i < 2; ++i) {{
-        double v = s->x0[i] > ST_LO[i] ? s->x0[i] : ST_LO[i];
+        double v = x0[i] > ST_LO[i] ? x0[i] : ST_LO[i];
         v = v < ST_HI[i] ? v : ST_HI[i];
         x0s[i] = (v - ST_OFF[i]) / ST_SC[i];
     }}
@@ -418,6 +419,8 @@ static void pk_initial(pk_chain *s, const double *us) {{
     s->x[1] = x0s[1];
     if ({residual}) s->x[1] = x0s[1] - (pk_yaw_ref(x0s[0], us[3]) - ST_OFF[1]) / ST_SC[1];
 }}
+
+static void pk_initial(pk_chain *s, const double *us) {{ pk_set_state(s, s->x0, us); }}
 
 /* ---------------------------------------------------------------- the interface */
 size_t pk_size(void) {{ return sizeof(pk_chain); }}
@@ -465,6 +468,10 @@ void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
     pk_mlp({st_tab}, {n_st}, z, f);
     s->x[0] = s->x[0] + NSS_DT * f[0];
     s->x[1] = s->x[1] + NSS_DT * f[1];
+    if ({shift} && y[1] >= LATCH_BAR && fabs(s->x[0] * ST_SC[0] + ST_OFF[0]) < LATCH_SPEED) {{
+        static const double rest[2] = {{0.0, 0.0}};  /* the brake-hold latch */
+        pk_set_state(s, rest, us);
+    }}
     s->vx_now = s->x[0] * ST_SC[0] + ST_OFF[0];
     pk_yaw(s->x, us[3], &s->yaw_prev);
 }}

@@ -39,6 +39,7 @@ the command histories.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -53,7 +54,7 @@ from parknss.actuators.spec import CHANNELS, feature_values
 from parknss.errors import DataError
 from parknss.nss.config import NSSConfig
 from parknss.nss.model import I_STEER, NSSModel, Rollout
-from parknss.signals import ACTUAL_CHANNELS
+from parknss.signals import ACTUAL_CHANNELS, kmh_to_ms
 
 ACTUALS: tuple[str, ...] = ACTUAL_CHANNELS[1:]  # torque, brake_pressure, steer
 MAX_SHIFT_PASSES = 4  # decoupled fixed-point passes before the interleaved loop takes over
@@ -154,6 +155,8 @@ class Chain(nn.Module):
             return self._interleaved(c, x0, y0, measured, rule)
         if not rule:  # the engaged gear (a log), or a measured drive channel: no rule
             return self._decoupled(c, x0, y0, measured, states)
+        if math.isfinite(self.envelope.hold_latch_bar) and states is None:
+            return self._interleaved(c, x0, y0, measured, True)  # the latch acts on the state
         return self._shifted(c, x0, y0, measured, states)
 
     def _rules(self, c: Tensor) -> list[ShiftByWire]:
@@ -205,6 +208,7 @@ class Chain(nn.Module):
         integrate = nss.step_function()
         dt_nss = nss.dtype
         modelled = self.modelled
+        env = self.envelope
         states = {
             ch: m.init_state(c[:, 0, 1 + i], y0[:, i])
             for i, ch in enumerate(CHANNELS)
@@ -241,6 +245,12 @@ class Chain(nn.Module):
             Xs.append(x)
             Us.append(u)
             x = integrate(x, us)
+            if rule:  # the brake-hold latch (parknss.actuators.envelopes), closed loop only
+                held = (ys[1] >= env.hold_latch_bar) & (
+                    nss.vx_phys(x[:, 0]).abs() < kmh_to_ms(env.hold_latch_kmh))
+                if bool(held.any()):
+                    rest = nss.initial_state_scaled(torch.zeros_like(x0).to(dt_nss), us)
+                    x = torch.where(held[:, None], rest, x)
             vx = nss.vx_phys(x[:, 0]).to(torch.float64)
             yaw = nss.yaw_phys(nss.reconstruct_yaw(x, us[:, I_STEER])[2]).to(torch.float64)
         U = torch.stack(Us, dim=1)

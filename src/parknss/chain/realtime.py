@@ -114,10 +114,14 @@ class NumpyNSS:
         return x + self.dt * numpy_tanh_mlp(self.state, z)
 
 
+_REST = np.zeros(2)  # [vx, yaw rate] of a car held at rest
+
+
 class RealtimeChain:
     """Envelopes -> steppers -> NSS, one sample per call (see the module doc). ``gear_rule``
-    (default True: a Plant's gear is a request) gates the gear by the shift-by-wire rule;
-    False replays a log's engaged gear as given (:mod:`parknss.chain.model`)."""
+    (default True: a Plant's gear is a request) gates the gear by the shift-by-wire rule and
+    applies the brake-hold latch (:mod:`parknss.actuators.envelopes`); False replays a
+    log's engaged gear and the NSS as given (:mod:`parknss.chain.model`)."""
 
     def __init__(
         self,
@@ -195,6 +199,8 @@ class RealtimeChain:
             self.x = self.nss.initial_state(self._x0, u)
         out = self.nss.readout(self.x, us)
         self.x = self.nss.advance(self.x, us)
+        if self.shift is not None and self.env.env.held(act[1], self.nss.vx(self.x)):
+            self.x = self.nss.initial_state(_REST, u)  # the brake-hold latch (envelopes)
         self.vx_now = self.nss.vx(self.x)
         self.yaw_prev = self.nss.yaw(self.x, us[3])[1]
         return act, out

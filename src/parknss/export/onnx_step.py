@@ -50,7 +50,7 @@ from parknss.chain.realtime import NumpyNSS, RealtimeChain
 from parknss.errors import CheckpointError, ParknssError
 from parknss.nss.nets import NumpyLayers
 from parknss.outputs import OutputExistsError, atomic_file
-from parknss.signals import DT
+from parknss.signals import DT, kmh_to_ms
 
 OPSET = 17
 CORE: tuple[str, ...] = ("last_torque_cmd", "last_decel_cmd", "last_steer_cmd", "gear_request",
@@ -270,6 +270,8 @@ class ChainStep(nn.Module):
         self.lo, self.hi = _t(e.cmd_lo), _t(e.cmd_hi)
         self.env = e
         self.max_speed, self.n_shift = rt.shift.max_speed, float(rt.shift.n_shift)
+        self.latch_bar = float(min(e.hold_latch_bar, 1.0e30))  # inf: never (float32-safe)
+        self.latch_speed = kmh_to_ms(e.hold_latch_kmh)
         self.nss = _NSS(rt.nss)
         self.chans = nn.ModuleList(_Channel(rt.steppers[c], rt.specs[c].features)
                                    for c in CHANNELS)
@@ -303,6 +305,10 @@ class ChainStep(nn.Module):
         us = self.nss.scale_u(torch.stack([g, tq, pb, st]))
         x = torch.where(s[7] > 0.5, s[10:12], self.nss.initial(s[8:10], us))
         out, x1 = self.nss.step(x, us)
+        # the brake-hold latch (parknss.actuators.envelopes): a held car is set to rest
+        held = (pb >= self.latch_bar) & (
+            torch.abs(x1[0] * self.nss.st_sc[0] + self.nss.st_off[0]) < self.latch_speed)
+        x1 = torch.where(held, self.nss.initial(torch.zeros_like(s[8:10]), us), x1)
         yaw1 = self.nss.yaw_s(x1, us[3]) * self.nss.st_sc[1] + self.nss.st_off[1]
         vx1 = x1[0] * self.nss.st_sc[0] + self.nss.st_off[0]
         core = torch.stack([c[0], c[1], c[2], request, st, g, count1, torch.ones_like(g),
