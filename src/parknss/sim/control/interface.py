@@ -57,7 +57,7 @@ class InterfaceConfig(StrictModel):
         BLIND_ZONE_MS, gt=0, description="measured |vx| below this counts as stopped, m/s"
     )
     standstill_time_s: float = Field(0.3, ge=0, description="stop confirmed after, s")
-    kp: float = Field(1.95, ge=0, description="speed-error gain, (m/s²)/(m/s)")
+    kp: float = Field(2.535, ge=0, description="speed-error gain, (m/s²)/(m/s)")
     ki: float = Field(1.3, ge=0, description="speed-error integral gain, (m/s²)/m")
     kff: float = Field(1.3, ge=0, description="feed-forward of the requested acceleration, -")
     integral_max_ms2: float = Field(0.6, ge=0, description="integral clamp, m/s²")
