@@ -219,7 +219,7 @@ def test_brake_hold_latch_holds_a_car_at_rest_in_closed_loop_only(setup):
     """Under a full brake-hold inside the blind zone the Plant (gear rule, closed loop) is
     set to rest exactly and stays there until the brake is released; a replay
     (gear_rule=False) leaves the NSS as it is (actuators/envelopes.py, the latch)."""
-    camp, nss, _, env, cmd_models, _ = setup
+    _, nss, _, env, cmd_models, _ = setup
     assert math.isfinite(env.hold_latch_bar) and env.hold_latch_bar > 0
     chain = make_chain(nss, cmd_models, env)
     plant = DeployedChain(chain)
