@@ -122,3 +122,29 @@ def test_convergence_history_marks_the_optimum(tiny):
     assert res.epochs == list(range(1, cfg.full.convergence_epochs + 1))
     assert len(res.raw) == len(res.smooth) == len(res.output) == len(res.epochs)
     assert res.best_epoch == res.epochs[res.smooth.index(min(res.smooth))]
+
+
+def test_fold_job_resumes_from_its_training_state(tiny, tmp_path, monkeypatch):
+    """A fold fit with a state folder checkpoints as it trains; called again (a study
+    resumed in a later sitting) it continues from the state, not from epoch 0, and the
+    numbers are those of the uninterrupted fit."""
+    from parknss.experiments.folds import fold_job
+
+    data, _ = tiny
+    over = {"model": {"state_layers": 1, "state_units": 4, "output_layers": 1,
+                      "output_units": 4},
+            "train": {"epochs": 6, "checkpoint_every": 2, "val_every": 1}}
+    kw = {"split": "cv", "index": 1, "data": data, "overrides": over}
+    from parknss.nss import train_state
+
+    loads = []
+    real_load = train_state.load
+    monkeypatch.setattr(train_state, "load", lambda *a, **k: loads.append(1) or real_load(*a, **k))
+    plain = fold_job(**kw)
+    state = tmp_path / "state"
+    first = fold_job(**kw, state_dir=str(state))
+    assert (state / "train_state.json").is_file() and not loads
+    again = fold_job(**kw, state_dir=str(state))  # a later sitting: resumes from the state
+    assert loads == [1]
+    for res in (first, again):
+        assert res["errors"] == plain["errors"] and res["best_epoch"] == plain["best_epoch"]

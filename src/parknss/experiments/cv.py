@@ -153,6 +153,8 @@ def cv_jobs(
             }
             if save_dir is not None and model == "nss":
                 kw["save_dir"] = str(save_dir / f"{var}_fold{i}")
+                # the fit's resumable state: a killed run resumes mid-fold, not from epoch 0
+                kw["state_dir"] = str(save_dir.parent / "state" / f"{var}_fold{i}")
             jobs.append((var, Job("parknss.experiments.folds:fold_job", kw, f"{var} fold {i}")))
     return jobs
 

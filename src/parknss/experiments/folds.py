@@ -100,6 +100,7 @@ def fold_job(
     split_seed: int | None = None,
     save_dir: str | None = None,
     progress: bool = False,
+    state_dir: str | None = None,
 ) -> dict[str, Any]:
     """Fit one fold and score its held-out trials; returns :class:`FoldResult` as JSON.
 
@@ -110,6 +111,10 @@ def fold_job(
         config, overrides: NSS config YAML and section overrides, e.g.
             ``{"train": {"epochs": 300, "seed": 1}, "model": {"residual_yaw": False}}``.
         save_dir: if given, the fitted NSS is saved there (model.safetensors + model.json).
+        state_dir: if given, the fit checkpoints its training state there every
+            ``train.checkpoint_every`` epochs and a later call with the same fold and
+            config resumes from it (a fold of a study run across several sittings); a
+            state of another fit is refused by the fit's fingerprint check.
     """
     if model not in MODELS:
         raise ConfigError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
@@ -130,7 +135,9 @@ def fold_job(
     from parknss.nss.train import fit, geometry_of
 
     cfg = fold_config(config, overrides)
-    res = fit(train, val, cfg, geometry_of(campaign), progress=progress)
+    resume = state_dir is not None and (Path(state_dir) / "train_state.json").is_file()
+    res = fit(train, val, cfg, geometry_of(campaign), progress=progress,
+              out_dir=Path(state_dir) if state_dir is not None else None, resume=resume)
     logged, truth = logged_and_truth_errors(predict_trials(res.model, val), val, res.window_length)
     h = res.history
     saved = None

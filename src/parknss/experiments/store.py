@@ -61,7 +61,7 @@ CODE_FILES: tuple[str, ...] = (
 """The training code: files (globs) under ``src/parknss/`` whose edits change a fit's
 numbers. Editing any of them changes :func:`code_version`, so every stored fit misses."""
 
-KEY_IGNORED: tuple[str, ...] = ("data", "save_dir", "progress")
+KEY_IGNORED: tuple[str, ...] = ("data", "save_dir", "progress", "state_dir")
 """Job arguments that do not decide its numbers: the campaign folder (its content is the
 data hash), where a model is saved, the progress bar."""
 
