@@ -199,9 +199,10 @@ class RealtimeChain:
             self.x = self.nss.initial_state(self._x0, u)
         out = self.nss.readout(self.x, us)
         self.x = self.nss.advance(self.x, us)
-        if self.shift is not None and self.env.env.held(act[1], self.nss.vx(self.x)):
-            self.x = self.nss.initial_state(_REST, u)  # the brake-hold latch (envelopes)
         self.vx_now = self.nss.vx(self.x)
+        if self.shift is not None and self.env.env.held(act[1], self.vx_now):
+            self.x = self.nss.initial_state(_REST, u)  # the brake-hold latch (envelopes)
+            self.vx_now = self.nss.vx(self.x)
         self.yaw_prev = self.nss.yaw(self.x, us[3])[1]
         return act, out
 
