@@ -11,17 +11,15 @@ drive submodel sees. The numbers are the envelope's (:class:`~parknss.actuators.
 Envelope`, ``shift_speed_kmh``, ``shift_time_s``; the reference's 0.1 km/h and 0.25 s).
 
 :class:`ShiftByWire` is the rule, one sample per call in plain floats; it is written once
-here and used by the real-time chain (:class:`parknss.chain.realtime.RealtimeChain`) and,
-through :func:`engage_history`, by the batched rollout (:meth:`parknss.chain.model.Chain.
-rollout`). The generated C of the FMU (:mod:`parknss.chain.ccode`) is its third copy,
-tested against this one.
+here and used by the real-time chain (:class:`parknss.chain.realtime.RealtimeChain`) and the
+batched rollout's interleaved loop (:meth:`parknss.chain.model.Chain.rollout`). The
+generated C of the FMU (:mod:`parknss.chain.ccode`) is its third copy, tested against this
+one.
 """
 
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 from parknss.signals import DT, kmh_to_ms
 
@@ -65,20 +63,3 @@ class ShiftByWire:
                 self.gear, self.shifting, self._count = request, False, 0
                 self.shifts += 1
         return self.gear
-
-
-def engage_history(
-    rules: list[ShiftByWire], requests: np.ndarray, vx: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The rule over whole histories: requests (B, T) clean gears, vx (B, T) m/s the
-    chain's speed at each sample, one reset ``rules[b]`` per row. Returns the engaged
-    gears (B, T) and the shifting flags (B, T) bool."""
-    B, T = requests.shape
-    gears = np.empty((B, T))
-    shifting = np.zeros((B, T), dtype=bool)
-    for b in range(B):
-        r, req, v = rules[b], requests[b].tolist(), vx[b].tolist()
-        for k in range(T):
-            gears[b, k] = r.step(req[k], v[k])
-            shifting[b, k] = r.shifting
-    return gears, shifting

@@ -23,14 +23,9 @@ the rule's 0.1 km/h, so gating it again would delay shifts the car made at rest.
 The rule belongs to the drive train, with the drive submodel:
 a chain whose drive channel is measured feeds the logged gear (the engaged one) and the
 logged torque, which already carry the shifts (Phase B's all-measured reference is the NSS
-on the logged actuals, exactly). With a drive submodel, the interleaved loop applies it
-sample by sample; the decoupled rollout solves it as a fixed point over whole histories
-(roll out with the gears it has, apply the rule to the predicted vx, repeat until the gears
-and shifting flags no longer change). The fixed point is exact, not an approximation:
-gear(k) depends on vx(0..k) only and vx(k) on inputs up to k-1, so every pass settles at
-least one more sample; with no gear change in the commands (or none the rule touches) it
-costs one rollout, and after
-``MAX_SHIFT_PASSES`` passes the interleaved loop (the same rule, sample by sample) finishes.
+on the logged actuals, exactly). With a drive submodel the rule, like the brake-hold latch
+it comes with (:mod:`parknss.actuators.envelopes`), acts sample by sample on the chain's own
+state, so a closed-loop rollout is the interleaved loop.
 
 Initial conditions of a trial rollout: the measured state [vx(0), ω_z(0)] (as for the NSS
 alone), the measured actuals at k = 0 for the lag submodels, the first command filling
@@ -39,7 +34,6 @@ the command histories.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -49,7 +43,7 @@ from torch import Tensor, nn
 
 from parknss.actuators.envelopes import Envelope, clean_commands, limit_outputs_torch
 from parknss.actuators.models import ActuatorModel
-from parknss.actuators.shift import ShiftByWire, engage_history
+from parknss.actuators.shift import ShiftByWire
 from parknss.actuators.spec import CHANNELS, feature_values
 from parknss.errors import DataError
 from parknss.nss.config import NSSConfig
@@ -57,7 +51,6 @@ from parknss.nss.model import I_STEER, NSSModel, Rollout
 from parknss.signals import ACTUAL_CHANNELS, kmh_to_ms
 
 ACTUALS: tuple[str, ...] = ACTUAL_CHANNELS[1:]  # torque, brake_pressure, steer
-MAX_SHIFT_PASSES = 4  # decoupled fixed-point passes before the interleaved loop takes over
 
 
 @dataclass
@@ -151,13 +144,11 @@ class Chain(nn.Module):
             raise DataError("a chain with measured channels needs the measured actuals")
         x0 = torch.as_tensor(x0, dtype=torch.float64)
         rule = gear_rule and self.model("drive") is not None
-        if self.state_aware and states is None:
+        if rule and states is not None:
+            raise DataError("the gear rule reads the chain's own vx: no fixed states with it")
+        if rule or (self.state_aware and states is None):
             return self._interleaved(c, x0, y0, measured, rule)
-        if not rule:  # the engaged gear (a log), or a measured drive channel: no rule
-            return self._decoupled(c, x0, y0, measured, states)
-        if math.isfinite(self.envelope.hold_latch_bar) and states is None:
-            return self._interleaved(c, x0, y0, measured, True)  # the latch acts on the state
-        return self._shifted(c, x0, y0, measured, states)
+        return self._decoupled(c, x0, y0, measured, states)
 
     def _rules(self, c: Tensor) -> list[ShiftByWire]:
         """One gear rule per row, engaged in the row's first (clean) gear."""
@@ -167,22 +158,6 @@ class Chain(nn.Module):
             r.reset(g0)
             rules.append(r)
         return rules
-
-    def _shifted(self, c, x0, y0, measured, states=None) -> ChainRollout:
-        """The decoupled rollout under the gear rule: the fixed point of the module doc."""
-        requests = c[..., 0].numpy()
-        gears, shifting = requests, np.zeros(requests.shape, dtype=bool)
-        for _ in range(MAX_SHIFT_PASSES):
-            cc = c.clone()
-            cc[..., 0] = torch.as_tensor(gears)
-            cc[..., 1] = torch.where(torch.as_tensor(shifting), 0.0, cc[..., 1])
-            r = self._decoupled(cc, x0, y0, measured, states)
-            vx = states[0] if states is not None else r.nss.vx
-            g2, s2 = engage_history(self._rules(c), requests, vx.detach().double().numpy())
-            if np.array_equal(g2, gears) and np.array_equal(s2, shifting):
-                return r
-            gears, shifting = g2, s2
-        return self._interleaved(c, x0, y0, measured, True)
 
     def _decoupled(self, c, x0, y0, measured, states=None) -> ChainRollout:
         """Every submodel over the whole history, the output envelope, then the NSS."""
