@@ -89,3 +89,34 @@ def test_speed_cap_slows_before_steering_changes():
     assert at_kink == pytest.approx(
         400.0 / (math.degrees(math.atan(0.2 * 3.0)) * 12.1 / 0.3), rel=0.2
     )
+
+
+def test_request_does_not_ramp_on_behind_a_car_that_overshot():
+    """A plant faster than the request (the learned chain launching in reverse on TPCAP 13)
+    gets a request that holds instead of ramping up, so the interface's feed-forward of the
+    request's acceleration does not push against the speed feedback."""
+    from helpers.scenes import straight_segment
+    from parknss.plant import PlantOutput
+    from parknss.sim.control.tracker import DRIVE, Tracker
+    from parknss.sim.trajectory import Trajectory
+
+    for d in (1, -1):
+        tr = Tracker(Trajectory([straight_segment(d, 8.0)], source="test"))
+        tr.phase, tr.v_ref = DRIVE, 0.0
+
+        def out(vx, d=d, tr=tr):
+            return PlantOutput(d, 0.0, 0.0, tr.steer, vx, 0.0, 0.0, 0.0)
+
+        x = 0.0
+        for _ in range(50):  # the car follows the ramp: the request rises 0.4 m/s² x 10 ms
+            req = tr.step((x, 0.0, 0.0), out(d * tr.v_ref), True)
+            x += d * req.speed * tr.dt
+        assert req.speed == pytest.approx(0.2, abs=1e-9) and req.accel == pytest.approx(0.4)
+        held = req.speed
+        for _ in range(30):  # the car runs away at 0.6 m/s: the request holds
+            req = tr.step((x, 0.0, 0.0), out(d * 0.6), False)
+            x += d * 0.6 * tr.dt
+            assert req.speed == pytest.approx(held) and req.accel <= 0.0
+        for _ in range(5):  # back below the request: it ramps on
+            req = tr.step((x, 0.0, 0.0), out(d * 0.1), False)
+        assert req.speed > held and req.accel == pytest.approx(0.4)

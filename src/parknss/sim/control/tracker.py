@@ -12,7 +12,10 @@ distance (if any; floored), the steering-rate cap (the smoothed reference steeri
 not need more than ``steer_rate_dps``; floored at ``v_floor_ms``) -- these caps made
 reachable by braking at ``decel_ms2`` before them --, √(2·a_dec·(d_togo −
 tol)), ramp-up from the last request at ``accel_ms2`` and at most ``lead_ms`` above the
-measured speed, so the request does not run away from a car still held at a launch).
+measured speed, so the request does not run away from a car still held at a launch; the
+ramp pauses while the car is faster than the request by more than ``ramp_hold_ms``, so
+a plant that overshoots is
+braked back by the speed feedback instead of being pushed on by the ramp's feed-forward).
 The stop is requested when the distance to go falls below ``stop_tolerance_m`` +
 v·``stop_latency_s``.
 
@@ -47,6 +50,9 @@ class TrackerConfig(StrictModel):
     v_max_ms: float = Field(0.75, gt=0, description="speed ceiling, m/s")
     accel_ms2: float = Field(0.4, gt=0, description="speed-request ramp-up, m/s²")
     lead_ms: float = Field(0.15, gt=0, description="request at most this above vx, m/s")
+    ramp_hold_ms: float = Field(
+        0.05, ge=0, description="the ramp pauses while vx exceeds the request by more, m/s"
+    )
     decel_ms2: float = Field(0.35, gt=0, description="approach deceleration, m/s²")
     v_floor_ms: float = Field(0.2, gt=0, description="lowest steering/planned speed cap, m/s")
     use_planned_speed: bool = Field(True, description="cap by the planned speed at s")
@@ -176,7 +182,11 @@ class Tracker:
         c = self.cfg
         cap = ref.at(s, self.caps[self.index])
         approach = math.sqrt(2.0 * c.decel_ms2 * max(togo - c.stop_tolerance_m, 0.0))
-        ramp = min(self.v_ref + c.accel_ms2 * self.dt, speed + c.lead_ms)
+        # the ramp rises only while the car is not already faster than the request: a
+        # request still ramping up behind a car that overshot would feed its ramp forward
+        # against the speed feedback (the interface adds kff x the request's acceleration)
+        rise = c.accel_ms2 * self.dt if speed <= self.v_ref + c.ramp_hold_ms else 0.0
+        ramp = min(self.v_ref + rise, speed + c.lead_ms)
         return max(min(cap, approach, ramp), 0.0)
 
     def _steering(self, ref: PathReference, proj: Projection, y: PlantOutput) -> float:
