@@ -102,14 +102,16 @@ def test_entry_is_plain_json_with_provenance(tmp_path):
     assert entry.key == path.stem
     doc = json.loads(path.read_text())
     assert doc["key"] == path.stem and doc["result"] == res
-    assert doc["job"] == {"fn": PROBE, "kwargs": {"seed": 3, "steps": 20}, "name": ""}
+    # the function's defaults filled in (n), where a model goes dropped
+    assert doc["job"] == {"fn": PROBE, "kwargs": {"seed": 3, "n": 256, "steps": 20}, "name": ""}
     assert doc["data_hash"] == "d0" and doc["code_version"] == code_version()
     prov = doc["provenance"]
     assert {"git_revision", "dirty", "machine", "python", "torch", "wall_s", "cpu_s",
             "finished_utc", "config"} <= set(prov)
     assert prov["wall_s"] == 1.25 and prov["cpu_s"] == 1.0 and prov["machine"]["cores"] >= 1
-    # where a model was saved does not decide the scores: the same key
+    # where a model was saved does not decide the scores, nor spelling out a default
     assert store.get(Job(PROBE, {"seed": 3, "steps": 20}))[0]
+    assert store.get(Job(PROBE, {"seed": 3, "steps": 20, "n": 256}))[0]
 
 
 def test_corrupt_file_is_ignored_with_a_warning_and_refitted(tmp_path, capsys):
@@ -203,3 +205,39 @@ def test_table2_from_the_store_notes_the_missing_fold_model(tmp_path, tiny_study
     assert second["sources"]["table2"] == {"run_cache": 0, "store": n, "fitted": 0}
     assert "fig5_rollouts.png" not in second["files"]
     assert "Fig. 5 is not drawn" in (tmp_path / "b" / "report.html").read_text()
+
+
+def test_an_nss_fit_is_keyed_by_the_config_it_resolves_to(tmp_path):
+    store = _store(tmp_path)
+    fold = "parknss.experiments.folds:fold_job"
+
+    def key(overrides, **kw):
+        return store.entry_key(Job(fold, {"split": "cv", "index": 0, "model": "nss",
+                                          "overrides": overrides, **kw}))[0]  # fmt: skip
+
+    paper = key({})
+    assert key({"train": {"epochs": 3200}}) == paper  # the shipped default, spelled out
+    assert key({}, save_dir="a", state_dir="b", progress=True) == paper
+    assert key({"train": {"threads": 2}}) == paper  # threads do not change the numbers
+    assert key({"fast": {"batch": 7}}) == paper  # nor the fast section, for a paper fit
+    assert key({"train": {"epochs": 3000}}) != paper
+    fast = key({"train": {"recipe": "fast"}})
+    assert fast != paper and key({"train": {"recipe": "fast"}, "fast": {"batch": 7}}) != fast
+
+
+def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study, capsys):
+    data, cfg = tiny_study
+    base = ["--workers", "1", "--data", str(data), "--config", str(cfg),
+            "--store", str(tmp_path / "results"), "--json"]  # fmt: skip
+    assert main(["reproduce", "table2", *base, "--out", str(tmp_path / "a")]) == 0
+    capsys.readouterr()
+    assert main(["reproduce", "time_to_accuracy", *base, "--out", str(tmp_path / "b")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    # the paper recipe's fold fits are Table II's (same resolved config): read, not refitted
+    assert doc["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 2, "fitted": 2}
+    assert "time_to_accuracy.png" in doc["files"]
+    fast = [e for _, e in entries(tmp_path / "results")
+            if not isinstance(e, str) and e.kwargs["nss"]["train"].get("recipe") == "fast"]
+    assert len(fast) == 2 and all(e.result["recipe"] == "fast" for e in fast)
+    hist = fast[0].result["history"]
+    assert len(hist["cpu_s"]) == len(hist["raw"]) and fast[0].result["cpu_s"] > 0.0

@@ -12,6 +12,7 @@ from parknss.data.io import write_campaign
 TINY_NET = {
     "model": {"state_layers": 1, "state_units": 4, "output_layers": 1, "output_units": 4},
     "train": {"val_every": 1, "smooth_window": 1},
+    "fast": {"window": 40, "batch": 4, "updates": 6, "val_every": 2, "finish_epochs": 2},
 }
 
 TINY_CONFIG = {
@@ -23,6 +24,7 @@ TINY_CONFIG = {
         "ablation_folds": [0],
         "seeds": [0, 1, 2],
         "loss_lrs": [1.0e-3, 2.0e-3],
+        "tta_folds": [0, 1],
         "overrides": TINY_NET,
     },
     "quick": {

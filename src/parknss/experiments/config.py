@@ -39,9 +39,10 @@ class Budget(StrictModel):
     loss_lrs: list[float] = Field([1e-3, 2e-3, 4e-3], description="LR sweep per loss")
     sim_cells: list[int] | None = Field(None, description="Table V cells (None: all 36)")
     sim_scene: int = Field(0, ge=0, description="grid cell drawn in Figs. 8/9")
+    tta_folds: list[int] = Field([0, 1, 2, 3], description="CV folds of the recipe comparison")
     overrides: Overrides = Field(default_factory=dict, description="NSS overrides, all fits")
 
-    @field_validator("folds", "ablation_folds", "seeds", "loss_lrs")
+    @field_validator("folds", "ablation_folds", "seeds", "loss_lrs", "tta_folds")
     @classmethod
     def _nonempty(cls, v: list) -> list:
         if not v:
@@ -122,6 +123,9 @@ class ExperimentsConfig(StrictModel):
     seed_noise_split: SplitRef = SplitRef(index=1)
     convergence_split: SplitRef = SplitRef(index=0)
     loss_lr_metric: str = "vx_mse_moving_kmh2"
+    tta_speedup: float = Field(
+        8.0, gt=0.0, description="CPU-time factor the fast recipe must reach the paper's error in"
+    )
     full: Budget = Budget()
     quick: Budget = Budget(epochs=4, convergence_epochs=8, folds=[0, 1], ablation_folds=[0])
     axes: list[AblationAxis] = Field(default_factory=list)

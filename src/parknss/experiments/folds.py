@@ -40,8 +40,9 @@ class FoldResult:
     errors: :class:`~parknss.metrics.errors.OpenLoopErrors` as JSON against the logged
     channels; truth_errors: the same against the noise-free truth channels when the
     campaign has them (synthetic), else None. NSS only: best_epoch, epochs, the history
-    of the validation criterion (epochs, raw and smoothed moving-region state loss, and
-    the output loss at the same epochs) and the window length.
+    of the validation criterion (steps, raw and smoothed moving-region state loss, the
+    output loss and the fit's CPU time in s at the same steps), the window length, the
+    training recipe and the fit's CPU time (s; None if a resumed state lacked it).
     """
 
     split: str
@@ -58,6 +59,8 @@ class FoldResult:
     n_windows: int | None = None
     history: dict | None = None
     model_dir: str | None = None
+    recipe: str | None = None
+    cpu_s: float | None = None
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -157,6 +160,9 @@ def fold_job(
             "raw": h.crit_raw,
             "smooth": h.crit_smooth,
             "output": [row.get("val_output") for row in h.rows if "val_output" in row],
+            "cpu_s": [row.get("cpu_s") for row in h.rows if "val_output" in row],
         },
+        recipe=res.recipe,
+        cpu_s=res.cpu_s,
         model_dir=saved,
     ).to_json()

@@ -2,10 +2,10 @@
 
 A fit (an executor :class:`~parknss.executor.Job`, e.g. a
 :func:`~parknss.experiments.folds.fold_job`) is stored under a key that hashes three
-things: the job (its function and the keyword arguments that decide its numbers, see
-:func:`key_kwargs`), the **data hash** of the campaign it reads
-(:meth:`parknss.data.trial.Campaign.data_hash`, once per campaign and store) and the
-**training code version** (:func:`code_version`: a hash of the files in
+things: the job (its function and the keyword arguments that decide its numbers, the
+function's defaults filled in, see :func:`bound_kwargs` and :func:`key_kwargs`), the
+**data hash** of the campaign it reads (:meth:`parknss.data.trial.Campaign.data_hash`,
+once per campaign and store) and the **training code version** (:func:`code_version`: a hash of the files in
 :data:`CODE_FILES`, the code and the shipped NSS config that decide a fit's numbers).
 A changed campaign or an edited training file therefore misses, and the fit runs again.
 
@@ -39,7 +39,7 @@ from typing import Any
 
 from parknss.config import PACKAGE_DIR, REPO_ROOT
 from parknss.errors import ConfigError
-from parknss.executor import Job
+from parknss.executor import Job, resolve
 
 ENV_VAR = "PARKNSS_RESULTS"
 OFF = "off"
@@ -88,11 +88,36 @@ def _file_digest(path: str | Path) -> str:
         raise ConfigError(f"{path}: cannot read the job's config ({exc.strerror})") from exc
 
 
+def bound_kwargs(fn: str, kwargs: Mapping[str, Any]) -> dict[str, Any]:
+    """``kwargs`` as the job function sees them: its defaults filled in (so a job that
+    spells out ``r=1`` and one that leaves it to the default are the same fit). Arguments
+    the function does not take are left for the job itself to refuse."""
+    import inspect
+
+    kwargs = {k: v for k, v in kwargs.items() if k not in KEY_IGNORED}
+    try:
+        sig = inspect.signature(resolve(fn))
+        bound = sig.bind_partial(**kwargs)
+    except (ConfigError, TypeError, ValueError):
+        return dict(kwargs)
+    bound.apply_defaults()
+    return dict(bound.arguments)
+
+
 def key_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
-    """The arguments that decide a job's numbers: :data:`KEY_IGNORED` dropped, a ``config``
-    file named by the hash of its content."""
+    """The arguments that decide a job's numbers: :data:`KEY_IGNORED` dropped; an NSS fit's
+    ``config`` file and ``overrides`` replaced by the config they resolve to
+    (:func:`~parknss.nss.config.fit_identity`), so that two studies asking for the same fit
+    in other words (``parknss cv`` with no overrides, ``reproduce`` with the cap spelled
+    out) share one entry; another job's ``config`` file named by the hash of its content."""
     out = {k: v for k, v in kwargs.items() if k not in KEY_IGNORED}
-    if out.get("config") is not None:
+    if "overrides" in out:
+        from parknss.experiments.folds import fold_config
+        from parknss.nss.config import fit_identity
+
+        cfg = fold_config(out.pop("config", None), out.pop("overrides"))
+        out["nss"] = fit_identity(cfg)
+    elif out.get("config") is not None:
         out["config"] = _file_digest(out["config"])
     return out
 
@@ -207,7 +232,8 @@ class ResultStore:
 
     def entry_key(self, job: Job) -> tuple[str, dict, str]:
         """(key, key arguments, data hash) of ``job``."""
-        kw, dh = key_kwargs(job.kwargs), self.data_hash(job.kwargs.get("data"))
+        kw = key_kwargs(bound_kwargs(job.fn, job.kwargs))
+        dh = self.data_hash(job.kwargs.get("data"))
         return store_key(job.fn, kw, dh, self.code), kw, dh
 
     def path(self, job: Job) -> Path:

@@ -61,10 +61,11 @@ def train_deployment(inputs: TrainInputs) -> tuple[dict, str]:
         criterion="training loss",
     )
     doc = {"model": str(model_dir), "figure": str(fig), **res.training_meta()}
+    steps = "epochs" if res.recipe == "paper" else f"steps of the {res.recipe} recipe"
     text = (
-        f"trained {res.epochs_run} epochs on {len(campaign)} trials "
+        f"trained {res.epochs_run} {steps} on {len(campaign)} trials "
         f"({res.n_windows} windows of {res.window_length}) in {res.wall_s:.0f} s; "
-        f"best epoch {res.best_epoch} (smoothed {h.criterion} {res.best_value:.5f}); "
+        f"best step {res.best_epoch} (smoothed {h.criterion} {res.best_value:.5f}); "
         f"model in {model_dir}"
     )
     return doc, text

@@ -7,7 +7,7 @@ the model that will be trained on it: the targets are scaled by the model's norm
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -35,6 +35,12 @@ class Batch:
     @property
     def steps(self) -> int:
         return self.u.shape[1]
+
+    def select(self, idx: Tensor) -> Batch:
+        """The sequences ``idx`` (1-D index tensor) of this batch, in that order."""
+        t = self.targets
+        targets = Targets(**{f.name: getattr(t, f.name)[idx] for f in fields(Targets)})
+        return Batch(self.x0[idx], self.u[idx], targets, [self.lengths[i] for i in idx.tolist()])
 
 
 def make_batch(model: NSSModel, w: Windows, blind_zone_kmh: float) -> Batch:

@@ -1,7 +1,8 @@
 """Configuration of the NSS model, its losses, data preparation and training (paper §II, §IV-B).
 
 Every default is the paper's; ``configs/nss.yaml`` lists them all. A YAML file overrides
-any subset, section by section (``model``, ``loss``, ``data``, ``train``, ``limiter``).
+any subset, section by section (``model``, ``loss``, ``data``, ``train``, ``fast``,
+``limiter``). The ``fast`` section is the fast training recipe's, not the paper's.
 """
 
 from __future__ import annotations
@@ -72,6 +73,11 @@ class DataConfig(StrictModel):
 class TrainConfig(StrictModel):
     """Optimisation (§IV-B): Adam, cosine LR from 2e-3, cap 3200 epochs, best checkpoint."""
 
+    recipe: Literal["paper", "fast"] = Field(
+        "paper",
+        description="paper: full-batch BPTT over the end-aligned windows for `epochs`; fast: "
+        "the `fast` section's minibatch phase, then a full-window finish (nss/recipes.py)",
+    )
     epochs: int = Field(3200, ge=1)
     lr: float = Field(2.0e-3, gt=0.0)
     lr_min: float = Field(0.0, ge=0.0, description="final LR of the cosine schedule")
@@ -84,6 +90,31 @@ class TrainConfig(StrictModel):
     )
     checkpoint_every: int = Field(50, ge=1, description="save the resumable state every N")
     dtype: Literal["float32", "float64"] = "float32"
+
+
+class FastConfig(StrictModel):
+    """The fast recipe (``train.recipe: fast``; not the paper's, see nss/recipes.py).
+
+    Phase 1: ``updates`` Adam steps, each on ``batch`` windows of ``window`` samples tiled
+    over every training trial, LR cosine from ``lr`` to ``train.lr_min``. Phase 2:
+    ``finish_epochs`` full-batch steps on the paper's windows, LR cosine from
+    ``finish_lr`` to ``train.lr_min``. Validation every ``val_every`` updates in phase 1
+    and every ``train.val_every`` steps in phase 2.
+    """
+
+    window: int = Field(256, ge=2, description="samples per phase-1 window (2.56 s at 100 Hz)")
+    batch: int = Field(32, ge=1, description="windows per phase-1 update")
+    updates: int = Field(2000, ge=0, description="phase-1 updates")
+    lr: float = Field(3.0e-3, gt=0.0, description="phase-1 initial LR (cosine to lr_min)")
+    val_every: int = Field(20, ge=1, description="validate every N phase-1 updates")
+    finish_epochs: int = Field(100, ge=0, description="phase-2 full-batch steps")
+    finish_lr: float = Field(5.0e-4, gt=0.0, description="phase-2 initial LR (cosine)")
+
+    @model_validator(mode="after")
+    def _some_steps(self) -> FastConfig:
+        if self.updates + self.finish_epochs < 1:
+            raise ValueError("the fast recipe needs updates + finish_epochs >= 1")
+        return self
 
 
 class LimiterConfig(StrictModel):
@@ -107,6 +138,7 @@ class NSSConfig(StrictModel):
     loss: LossConfig = LossConfig()
     data: DataConfig = DataConfig()
     train: TrainConfig = TrainConfig()
+    fast: FastConfig = FastConfig()
     limiter: LimiterConfig = LimiterConfig()
 
     @model_validator(mode="after")
@@ -114,6 +146,18 @@ class NSSConfig(StrictModel):
         if self.model.engine == "fused" and self.model.integrator != "euler":
             raise ValueError("engine 'fused' implements forward Euler only; use 'auto'/'eager'")
         return self
+
+
+def fit_identity(cfg: NSSConfig) -> dict:
+    """The fields of ``cfg`` that decide a fit's numbers, as JSON: all but the torch thread
+    count, and for a paper-recipe fit also without the recipe field and the fast recipe's
+    section (they do not enter it). Resume fingerprints and result-store keys use it."""
+    doc = cfg.model_dump(mode="json")
+    doc["train"].pop("threads", None)
+    if cfg.train.recipe == "paper":
+        doc["train"].pop("recipe", None)
+        doc.pop("fast", None)
+    return doc
 
 
 def load_nss_config(path=None, **sections) -> NSSConfig:

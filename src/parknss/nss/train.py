@@ -1,23 +1,26 @@
 """Training of the NSS model (paper §IV-B): BPTT through the full open-loop rollout.
 
-All training windows are rolled out at once from their measured initial states and the
-loss of eq. 8 is backpropagated through every step (by default through the fused Euler
-kernel of :mod:`parknss.nss.fused`). Adam, cosine learning rate from 2e-3 to ``lr_min``
-over the epoch cap, continuous best-checkpoint tracking on the smoothed criterion of
+Each step rolls out the sequences of its batch from their measured initial states and
+backpropagates the loss of eq. 8 through every step of them (by default through the
+fused Euler kernel of :mod:`parknss.nss.fused`). Which batch and learning rate a step
+has is the recipe's (:mod:`parknss.nss.recipes`): the paper's (every training window at
+once, Adam, cosine from 2e-3 to ``lr_min`` over the epoch cap) or the fast one.
+Continuous best-checkpoint tracking on the smoothed criterion of
 :mod:`parknss.nss.history`. One torch intra-op thread by default.
 
-Order within epoch e (1-based): validation of the current weights θ_e (every
-``val_every`` epochs and at the last), the training forward/backward of θ_e, the history
-row, a snapshot of θ_e if the smoothed criterion is a new minimum, then the Adam step to
-θ_{e+1}. Every ``checkpoint_every`` epochs (and at the end) the whole state (weights,
-best weights, Adam moments, RNG, history) is written to ``out_dir`` as
-``train_state.safetensors`` + ``train_state.json``; a fit started with ``resume=True``
-continues from there and ends bit-identically to an uninterrupted one.
+Order within step e (1-based; an epoch of the paper recipe): validation of the current
+weights θ_e (when the recipe says, always at the last step), the training
+forward/backward of θ_e, the history row (with the fit's CPU time so far, ``cpu_s``), a
+snapshot of θ_e if the smoothed criterion is a new minimum, then the Adam step to
+θ_{e+1}. Every ``checkpoint_every`` steps (and at the end) the whole state (weights,
+best weights, Adam moments, RNG, history, wall and CPU time) is written to ``out_dir``
+as ``train_state.safetensors`` + ``train_state.json``; a fit started with ``resume=True``
+continues from there and ends bit-identically to an uninterrupted one (the minibatches
+of the fast recipe are a function of the step, not of an RNG stream).
 """
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -28,7 +31,7 @@ import torch
 
 from parknss.data.normalize import Normalizer
 from parknss.data.trial import Campaign, Trial
-from parknss.data.windows import make_windows, whole_trials, window_length
+from parknss.data.windows import whole_trials, window_length
 from parknss.errors import DataError, ParknssError
 from parknss.nss import train_state
 from parknss.nss.batch import Batch, make_batch
@@ -36,6 +39,7 @@ from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
 from parknss.nss.losses import LossTerms, nss_loss, output_loss, state_loss
 from parknss.nss.model import NORMALIZED, NSSModel
+from parknss.nss.recipes import cosine, make_recipe
 from parknss.vehicle import VehicleGeometry
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -57,16 +61,20 @@ class FitResult:
     train_ids: list[str]
     val_ids: list[str]
     data_hash: str
+    cpu_s: float | None = None
+    recipe: str = "paper"
 
     def training_meta(self) -> dict:
         """JSON metadata for the model artefact."""
         return {
+            "recipe": self.recipe,
             "epochs": self.epochs_run,
             "epoch_cap": self.config.train.epochs,
             "best_epoch": self.best_epoch,
             "best_criterion": self.best_value,
             "criterion": self.history.criterion,
             "wall_s": self.wall_s,
+            "cpu_s": self.cpu_s,
             "seed": self.config.train.seed,
             "data_hash": self.data_hash,
             "window_length": self.window_length,
@@ -77,12 +85,12 @@ class FitResult:
 
 
 def learning_rate(cfg: NSSConfig, epoch: int) -> float:
-    """LR of epoch (1-based): cosine from lr to lr_min over the cap, or constant."""
+    """LR of epoch (1-based) of the paper recipe: cosine from lr to lr_min over the cap, or
+    constant."""
     t = cfg.train
-    if t.schedule == "constant" or t.epochs <= 1:
+    if t.schedule == "constant":
         return t.lr
-    frac = (epoch - 1) / (t.epochs - 1)
-    return t.lr_min + 0.5 * (t.lr - t.lr_min) * (1.0 + math.cos(math.pi * frac))
+    return cosine(epoch, t.epochs, t.lr, t.lr_min)
 
 
 def check_trials(trials: Sequence[Trial], dt: float, who: str) -> None:
@@ -176,11 +184,11 @@ def fit(
 
 
 def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitResult:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     norm = Normalizer.fit(train, NORMALIZED, cfg.data.normalizer, cfg.data.clip_percentiles)
     L = window_length([tr.n for tr in train], cfg.data.window)
     model = build_model(cfg, norm, geometry)
-    batch = make_batch(model, make_windows(train, L), cfg.loss.blind_zone_kmh)
+    recipe = make_recipe(cfg, model, train, L)
     vbatch = make_batch(model, whole_trials(val), cfg.loss.blind_zone_kmh) if val else None
     data_hash = Campaign(train + val).data_hash()
     fp = train_state.fingerprint(cfg, data_hash, [t.id for t in train], [t.id for t in val], L)
@@ -188,34 +196,39 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
     crit = "val_state_moving" if val else "train_total"
     hist = History(crit, cfg.train.smooth_window)
     best_state: dict[str, torch.Tensor] | None = None
-    start, wall_before = 0, 0.0
+    start, wall_before, cpu_before = 0, 0.0, 0.0
     out = Path(out_dir) if out_dir is not None else None
     if resume and out is not None and train_state.exists(out):
         st = train_state.load(out, model, opt, fp)
-        start, hist, best_state, wall_before = st.epoch, st.history, st.best, st.wall_s
+        start, hist, best_state = st.epoch, st.history, st.best
+        wall_before, cpu_before = st.wall_s, st.cpu_s
     best_epoch, best_value = hist.best()
-    E = cfg.train.epochs
+    E = recipe.steps
     bar = _progress(E, start, progress)
     try:
         for e in range(start + 1, E + 1):
-            lr = learning_rate(cfg, e)
+            step = recipe.step(e)
             for g in opt.param_groups:
-                g["lr"] = lr
-            row: dict = {"epoch": e, "lr": lr}
+                g["lr"] = step.lr
+            row: dict = {"epoch": e, "lr": step.lr}
+            if recipe.name != "paper":
+                row["phase"] = step.phase
             smoothed = None
-            if vbatch is not None and ((e - 1) % cfg.train.val_every == 0 or e == E):
+            if vbatch is not None and step.validate:
                 vs, vy = validation_losses(model, vbatch, cfg)
                 row.update(val_state_moving=vs, val_output=vy)
                 smoothed = hist.add_criterion(e, vs)
             opt.zero_grad(set_to_none=True)
-            terms = epoch_loss(model, batch, cfg)
+            terms = epoch_loss(model, step.batch, cfg)
             if not torch.isfinite(terms.total):
-                raise ParknssError(f"training diverged at epoch {e} (loss {float(terms.total)})")
+                raise ParknssError(f"training diverged at step {e} (loss {float(terms.total)})")
             terms.total.backward()
             row.update({f"train_{k}": v for k, v in terms.as_floats().items()})
             del terms  # frees the graph now, so the fused kernels' buffers are recycled
-            if vbatch is None:
+            if vbatch is None and step.full:
                 smoothed = hist.add_criterion(e, row["train_total"])
+            if cpu_before is not None:
+                row["cpu_s"] = cpu_before + time.process_time() - c0
             hist.add_row(row)
             if smoothed is not None and smoothed < best_value:
                 best_epoch, best_value = e, smoothed
@@ -223,7 +236,8 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
             opt.step()
             if out is not None and (e % cfg.train.checkpoint_every == 0 or e == E):
                 wall = wall_before + time.perf_counter() - t0
-                train_state.save(out, model, opt, hist, best_state, e, wall, fp)
+                cpu = None if cpu_before is None else cpu_before + time.process_time() - c0
+                train_state.save(out, model, opt, hist, best_state, e, wall, fp, cpu)
             bar.update(1)
             bar.set_postfix(loss=f"{row['train_total']:.4f}", best=best_epoch)
             if on_epoch is not None:
@@ -241,7 +255,9 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
         epochs_run=E,
         wall_s=wall_before + time.perf_counter() - t0,
         window_length=L,
-        n_windows=batch.n,
+        n_windows=recipe.full.n,
+        cpu_s=None if cpu_before is None else cpu_before + time.process_time() - c0,
+        recipe=recipe.name,
         train_ids=[t.id for t in train],
         val_ids=[t.id for t in val],
         data_hash=data_hash,

@@ -1,8 +1,8 @@
 """The resumable state of a fit: ``train_state.safetensors`` + ``train_state.json``.
 
 Tensors (current weights ``model/*``, best weights ``best/*``, Adam moments and step
-counts ``opt/<i>/*``, the torch RNG ``rng/torch``) go into safetensors; the epoch, the
-history, the optimizer's hyper-parameters, the wall time and a fingerprint of the
+counts ``opt/<i>/*``, the torch RNG ``rng/torch``) go into safetensors; the step, the
+history, the optimizer's hyper-parameters, the wall and CPU time and a fingerprint of the
 configuration and data go into the JSON, with the SHA-256 of the tensor file so that a
 torn pair is detected. A state is resumed only by a fit whose fingerprint matches.
 """
@@ -19,7 +19,7 @@ from safetensors.torch import load_file
 
 from parknss.errors import CheckpointError
 from parknss.nss.checkpoint import atomic_save_tensors, atomic_write_text, sha256_file
-from parknss.nss.config import NSSConfig
+from parknss.nss.config import NSSConfig, fit_identity
 from parknss.nss.history import History
 from parknss.nss.model import NSSModel
 
@@ -31,9 +31,10 @@ META = "train_state.json"
 def fingerprint(
     cfg: NSSConfig, data_hash: str, train_ids: list[str], val_ids: list[str], L: int
 ) -> str:
-    """Hash of everything a resumed fit must share (config without threads, data, split)."""
-    doc = cfg.model_dump(mode="json")
-    doc["train"].pop("threads", None)
+    """Hash of everything a resumed fit must share (:func:`fit_identity` of the config, the
+    data, the split). A paper-recipe fit's fingerprint is the one it had before the
+    recipes existed."""
+    doc = fit_identity(cfg)
     blob = json.dumps(
         {"cfg": doc, "data": data_hash, "train": train_ids, "val": val_ids, "L": L},
         sort_keys=True,
@@ -51,6 +52,7 @@ class State:
     history: History
     best: dict[str, torch.Tensor] | None
     wall_s: float
+    cpu_s: float | None  # CPU time of the fit so far; None for a state written without it
 
 
 def save(
@@ -62,6 +64,7 @@ def save(
     epoch: int,
     wall_s: float,
     fp: str,
+    cpu_s: float | None = None,
 ) -> None:
     """Write the state after ``epoch`` (weights are θ_{epoch+1}, i.e. after its step)."""
     folder = Path(folder)
@@ -79,6 +82,7 @@ def save(
         "format": FORMAT,
         "epoch": epoch,
         "wall_s": wall_s,
+        "cpu_s": cpu_s,
         "fingerprint": fp,
         "has_best": best is not None,
         "param_groups": sd["param_groups"],
@@ -119,6 +123,11 @@ def load(folder: Path, model: NSSModel, opt: torch.optim.Optimizer, fp: str) -> 
             state.setdefault(int(i), {})[name] = v
     opt.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
     torch.set_rng_state(t["rng/torch"])
+    cpu = meta.get("cpu_s")
     return State(
-        int(meta["epoch"]), History.from_json(meta["history"]), best, float(meta["wall_s"])
+        int(meta["epoch"]),
+        History.from_json(meta["history"]),
+        best,
+        float(meta["wall_s"]),
+        None if cpu is None else float(cpu),
     )

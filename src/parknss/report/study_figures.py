@@ -8,6 +8,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import NullFormatter
 
 from parknss.report.style import save
 
@@ -103,4 +104,32 @@ def draw_limiter(result, path: str | Path) -> Path:
         ax.set_ylabel(UNITS[ch])
         ax.grid(alpha=0.3, axis="y")
     fig.suptitle("Inference limiter on the same fold models")
+    return save(fig, path)
+
+
+def draw_time_to_accuracy(result, path: str | Path) -> Path:
+    """Held-out criterion against the fit's CPU time, paper (C0) and fast (C1) recipe, one
+    panel per fold: raw points (light), smoothed line, the paper's final error (dotted)
+    and where the fast recipe reaches it (vertical)."""
+    n = len(result.folds)
+    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False)
+    for ax, f in zip(axes[0], result.folds, strict=True):
+        for curve, color, label in ((f.paper, "C0", "paper"), (f.fast, "C1", "fast")):
+            ax.plot(curve.cpu_s, curve.raw, ".", color=color, alpha=0.2, ms=2)
+            ax.plot(curve.cpu_s, curve.smooth, "-", color=color,
+                    label=f"{label} ({curve.total_cpu_s:.0f} s)")  # fmt: skip
+        ax.axhline(f.target, color="k", ls=":", lw=1, label=f"paper final {f.target:.4f}")
+        if f.reach_cpu_s is not None:
+            ax.axvline(f.reach_cpu_s, color="C1", ls="--", lw=1,
+                       label=f"reached at {f.reach_cpu_s:.0f} s (x{f.speedup_reach:.1f})")
+        ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        lo = min(min(f.paper.smooth), min(f.fast.smooth))
+        ax.set_ylim(0.9 * lo, 3.0 * lo)
+        ax.set_xlabel("CPU time of the fit [s]")
+        ax.set_ylabel("held-out criterion (scaled MAE)")
+        ax.set_title(f"CV fold {f.index}", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    fig.suptitle("Time to accuracy: paper recipe vs fast recipe")
     return save(fig, path)

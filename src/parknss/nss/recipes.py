@@ -1,0 +1,133 @@
+"""Training recipes (``train.recipe``): which batch, learning rate and validation each step has.
+
+A fit is a sequence of Adam steps k = 1..K; a recipe says, for each k, the batch it
+trains on, its learning rate, whether the held-out trials are validated before it, and
+whether its training loss is a deployment criterion (a full-batch step). The loop of
+:func:`parknss.nss.train.fit` is the same for every recipe.
+
+``paper`` (§IV-B): K = ``train.epochs`` full-batch steps over the end-aligned windows of
+the shortest training trial (:mod:`parknss.data.windows`), LR cosine from ``train.lr`` to
+``train.lr_min`` over K, validation every ``train.val_every`` steps and at the last.
+
+``fast`` (this toolkit's, not the paper's; ``fast`` section of the NSS config):
+
+1. ``fast.updates`` steps on minibatches of ``fast.batch`` windows of ``fast.window``
+   samples, the same end-aligned tiling over every training trial, each rolled out from
+   its measured initial state. The windows are drawn without replacement in passes of
+   ⌊n / batch⌋ updates; pass p is ordered by a permutation seeded with
+   (``train.seed``, p), so a resumed fit draws the same minibatches. LR cosine from
+   ``fast.lr`` to ``train.lr_min`` over the phase; validation every ``fast.val_every``
+   updates.
+2. ``fast.finish_epochs`` full-batch steps on the paper's windows (the paper's objective:
+   long-horizon open-loop rollouts), LR cosine from ``fast.finish_lr`` to
+   ``train.lr_min``; validation every ``train.val_every`` steps and at the last.
+
+A short-window update costs about window·batch / (L·n_L) of a paper epoch (the engine is
+compute bound at these batch sizes), so phase 1 makes many updates for the CPU time of
+few epochs; phase 2 teaches the whole-window horizon the short windows cannot see.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+
+from parknss.data.trial import Trial
+from parknss.data.windows import make_windows
+from parknss.nss.batch import Batch, make_batch
+from parknss.nss.config import NSSConfig
+from parknss.nss.model import NSSModel
+
+PERMUTATION_STRIDE = 1_000_003
+"""Seed of pass p's permutation: train.seed · stride + p (distinct for p < stride)."""
+
+
+def cosine(k: int, n: int, hi: float, lo: float) -> float:
+    """Cosine from ``hi`` at k = 1 to ``lo`` at k = n (``hi`` throughout if n <= 1)."""
+    if n <= 1:
+        return hi
+    return lo + 0.5 * (hi - lo) * (1.0 + math.cos(math.pi * (k - 1) / (n - 1)))
+
+
+@dataclass(frozen=True)
+class Step:
+    """What step k does: train on ``batch`` at ``lr``; validate first if ``validate``.
+
+    ``full``: a full-batch step (its training loss is the criterion of a fit without
+    held-out trials); ``phase``: "paper", "short" or "full".
+    """
+
+    batch: Batch
+    lr: float
+    validate: bool
+    full: bool
+    phase: str
+
+
+class PaperRecipe:
+    """§IV-B: full-batch BPTT over the paper's windows, cosine over ``train.epochs``."""
+
+    name = "paper"
+
+    def __init__(self, cfg: NSSConfig, full: Batch) -> None:
+        self.cfg, self.full = cfg, full
+        self.steps = cfg.train.epochs
+
+    def step(self, k: int) -> Step:
+        t = self.cfg.train
+        lr = t.lr if t.schedule == "constant" else cosine(k, self.steps, t.lr, t.lr_min)
+        val = (k - 1) % t.val_every == 0 or k == self.steps
+        return Step(self.full, lr, val, True, "paper")
+
+
+class FastRecipe:
+    """Minibatches of short windows, then a full-window finish (module docstring)."""
+
+    name = "fast"
+
+    def __init__(self, cfg: NSSConfig, full: Batch, short: Batch) -> None:
+        self.cfg, self.full, self.short = cfg, full, short
+        f = cfg.fast
+        self.updates, self.finish = f.updates, f.finish_epochs
+        self.steps = self.updates + self.finish
+        self.size = min(f.batch, short.n)
+        self.per_pass = max(short.n // self.size, 1)
+        self._perm: tuple[int, torch.Tensor] | None = None
+
+    def permutation(self, p: int) -> torch.Tensor:
+        """Order of the short windows in pass p (deterministic under train.seed)."""
+        if self._perm is None or self._perm[0] != p:
+            g = torch.Generator().manual_seed(self.cfg.train.seed * PERMUTATION_STRIDE + p)
+            self._perm = (p, torch.randperm(self.short.n, generator=g))
+        return self._perm[1]
+
+    def minibatch(self, k: int) -> Batch:
+        """The windows of phase-1 update k (1-based)."""
+        p, j = divmod(k - 1, self.per_pass)
+        idx = self.permutation(p)[j * self.size : (j + 1) * self.size]
+        return self.short.select(idx)
+
+    def step(self, k: int) -> Step:
+        f, t = self.cfg.fast, self.cfg.train
+        if k <= self.updates:
+            lr = cosine(k, self.updates, f.lr, t.lr_min)
+            return Step(self.minibatch(k), lr, (k - 1) % f.val_every == 0, False, "short")
+        j = k - self.updates
+        lr = cosine(j, self.finish, f.finish_lr, t.lr_min)
+        val = (j - 1) % t.val_every == 0 or k == self.steps
+        return Step(self.full, lr, val, True, "full")
+
+
+def make_recipe(
+    cfg: NSSConfig, model: NSSModel, train: Sequence[Trial], L: int
+) -> PaperRecipe | FastRecipe:
+    """The recipe of ``cfg.train.recipe`` with its batches built for ``model``."""
+    bz = cfg.loss.blind_zone_kmh
+    full = make_batch(model, make_windows(train, L), bz)
+    if cfg.train.recipe == "paper":
+        return PaperRecipe(cfg, full)
+    short = make_batch(model, make_windows(train, cfg.fast.window), bz)
+    return FastRecipe(cfg, full, short)
