@@ -5,9 +5,10 @@ A fit (an executor :class:`~parknss.executor.Job`, e.g. a
 things: the job (its function and the keyword arguments that decide its numbers, the
 function's defaults filled in, see :func:`bound_kwargs` and :func:`key_kwargs`), the
 **data hash** of the campaign it reads (:meth:`parknss.data.trial.Campaign.data_hash`,
-once per campaign and store) and the **training code version** (:func:`code_version`: a hash of the files in
-:data:`CODE_FILES`, the code and the shipped NSS config that decide a fit's numbers).
-A changed campaign or an edited training file therefore misses, and the fit runs again.
+once per campaign and store) and the **training code version** (:func:`code_version`:
+a hash of the files in :data:`CODE_FILES`, the code and the shipped NSS config that
+decide a fit's numbers). A changed campaign or an edited training file therefore
+misses, and the fit runs again.
 
 Layout: ``<store>/<function>/<key>.json``, one :class:`StoreEntry` per fit: the key, the
 job, the data hash, the code version, the job's JSON result (scores; never weights) and
