@@ -49,6 +49,8 @@ def test_code_version_follows_the_listed_files_only(tmp_path):
     (tmp_path / "sim").mkdir()
     (tmp_path / "sim" / "grid.py").write_text("x = 1\n")
     assert code_version(tmp_path) == code_version()
+    (tmp_path / "nss" / "config.py").write_text("# defaults: in the key, resolved\n")
+    assert code_version(tmp_path) == code_version()
     with (tmp_path / "nss" / "losses.py").open("a") as f:
         f.write("\n# an edit\n")
     assert code_version(tmp_path) != code_version()

@@ -6,8 +6,8 @@ things: the job (its function and the keyword arguments that decide its numbers,
 function's defaults filled in, see :func:`bound_kwargs` and :func:`key_kwargs`), the
 **data hash** of the campaign it reads (:meth:`parknss.data.trial.Campaign.data_hash`,
 once per campaign and store) and the **training code version** (:func:`code_version`:
-a hash of the files in :data:`CODE_FILES`, the code and the shipped NSS config that
-decide a fit's numbers). A changed campaign or an edited training file therefore
+a hash of the files in :data:`CODE_FILES`, the code that decides a fit's numbers; the
+NSS config's values enter through the job, resolved). A changed campaign or an edited training file therefore
 misses, and the fit runs again.
 
 Layout: ``<store>/<function>/<key>.json``, one :class:`StoreEntry` per fit: the key, the
@@ -57,10 +57,14 @@ CODE_FILES: tuple[str, ...] = (
     "vehicle.py",  # the kinematic prior of the residual yaw readout
     "experiments/folds.py",  # the fold job
     "experiments/limiter_study.py",  # the limiter job
-    "configs/nss.yaml",  # the NSS config every fold job starts from
 )
 """The training code: files (globs) under ``src/parknss/`` whose edits change a fit's
-numbers. Editing any of them changes :func:`code_version`, so every stored fit misses."""
+numbers. Editing any of them changes :func:`code_version`, so every stored fit misses.
+Not listed: ``nss/config.py`` and ``configs/nss.yaml``, the NSS config's defaults: an NSS
+fit's key holds the config it resolves to (:func:`key_kwargs`), so a changed default
+misses exactly the fits it changes (tuning the fast recipe's defaults keeps the paper
+recipe's fits, which do not read them)."""
+CODE_EXCLUDED: tuple[str, ...] = ("nss/config.py",)
 
 KEY_IGNORED: tuple[str, ...] = ("data", "save_dir", "progress", "state_dir")
 """Job arguments that do not decide its numbers: the campaign folder (its content is the
@@ -68,9 +72,10 @@ data hash), where a model is saved, the progress bar."""
 
 
 def code_files(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES) -> list[Path]:
-    """The files of :data:`CODE_FILES` under ``root``, sorted."""
+    """The files of :data:`CODE_FILES` under ``root`` but :data:`CODE_EXCLUDED`, sorted."""
     files = {p for pat in patterns for p in root.glob(pat) if p.is_file()}
-    return sorted(files)
+    skip = {root / x for x in CODE_EXCLUDED}
+    return sorted(files - skip)
 
 
 def code_version(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES) -> str:
