@@ -243,3 +243,18 @@ def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study
     assert len(fast) == 2 and all(e.result["recipe"] == "fast" for e in fast)
     hist = fast[0].result["history"]
     assert len(hist["cpu_s"]) == len(hist["raw"]) and fast[0].result["cpu_s"] > 0.0
+
+
+def test_sweep_fold_jobs_keep_their_training_state(tmp_path):
+    from parknss.experiments.sweep import Sweep, fold_spec
+
+    plain = fold_spec(Sweep(), "cv", 1, {"train": {"epochs": 5}})
+    kept = fold_spec(Sweep(state_root=tmp_path), "cv", 1, {"train": {"epochs": 5}})
+    assert "state_dir" not in plain.kwargs
+    assert kept.kwargs["state_dir"] == str(tmp_path / plain.key())  # one folder per fit
+    other = fold_spec(Sweep(state_root=tmp_path), "cv", 2, {"train": {"epochs": 5}})
+    assert other.kwargs["state_dir"] != kept.kwargs["state_dir"]
+    store = _store(tmp_path)  # where the state is kept does not decide the numbers
+    assert store.entry_key(kept)[0] == store.entry_key(plain)[0]
+    probe = fold_spec(Sweep(state_root=tmp_path), "cv", 1, {}, fn=PROBE)
+    assert "state_dir" not in probe.kwargs  # only fold jobs take one

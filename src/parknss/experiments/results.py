@@ -121,6 +121,7 @@ class RunContext:
             progress=self.progress,
             store=self.store,
             tally=self.tally,
+            state_root=self.out_dir / "state",
         )
 
 

@@ -7,8 +7,8 @@ function's defaults filled in, see :func:`bound_kwargs` and :func:`key_kwargs`),
 **data hash** of the campaign it reads (:meth:`parknss.data.trial.Campaign.data_hash`,
 once per campaign and store) and the **training code version** (:func:`code_version`:
 a hash of the files in :data:`CODE_FILES`, the code that decides a fit's numbers; the
-NSS config's values enter through the job, resolved). A changed campaign or an edited training file therefore
-misses, and the fit runs again.
+NSS config's values enter through the job, resolved). A changed campaign or an edited
+training file therefore misses, and the fit runs again.
 
 Layout: ``<store>/<function>/<key>.json``, one :class:`StoreEntry` per fit: the key, the
 job, the data hash, the code version, the job's JSON result (scores; never weights) and

@@ -30,8 +30,9 @@ FOLD_JOB = "parknss.experiments.folds:fold_job"
 @dataclass
 class Sweep:
     """Executor settings, the campaign folder (None: the default campaign), the result
-    store (None: none) and the tally that counts results from the cache, the store and
-    fitted."""
+    store (None: none), the tally that counts results from the cache, the store and
+    fitted, and where fold fits keep their resumable training state (``state_root``; None:
+    nowhere, a killed fit starts over)."""
 
     executor: str = "local"
     workers: int | None = None
@@ -41,6 +42,7 @@ class Sweep:
     progress: bool = True
     store: Store | None = None
     tally: Tally | None = None
+    state_root: Path | None = None
 
     def run(self, jobs: list[Job], desc: str) -> list[Any]:
         """Results of ``jobs`` in order (cached jobs are read, not recomputed; identical
@@ -95,7 +97,9 @@ def fold_spec(
     **extra: Any,
 ) -> Job:
     """A fold job (or a job of ``fn`` with the same arguments plus ``extra``); the overrides
-    are canonicalised (:func:`canonical_overrides`)."""
+    are canonicalised (:func:`canonical_overrides`). A fold job of a sweep with a
+    ``state_root`` checkpoints its fit under ``state_root/<job hash>`` and resumes from
+    there (a long study across sittings)."""
     kwargs: dict[str, Any] = {
         "split": split,
         "index": index,
@@ -105,6 +109,8 @@ def fold_spec(
         "overrides": canonical_overrides(overrides),
         **extra,
     }
+    if sweep.state_root is not None and fn == FOLD_JOB:
+        kwargs["state_dir"] = str(Path(sweep.state_root) / Job(fn, kwargs).key())
     return Job(fn, kwargs, name or f"{split} r{r} fold{index}")
 
 
