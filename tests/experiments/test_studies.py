@@ -148,3 +148,31 @@ def test_fold_job_resumes_from_its_training_state(tiny, tmp_path, monkeypatch):
     assert loads == [1]
     for res in (first, again):
         assert res["errors"] == plain["errors"] and res["best_epoch"] == plain["best_epoch"]
+
+
+def test_study_fits_take_the_budget_recipe_but_marked_axes_keep_theirs(tiny):
+    from parknss.experiments.ablations import _plan
+    from parknss.experiments.noise import seed_jobs
+
+    data, cfg = tiny
+    full = cfg.full.model_copy(update={"recipe": "fast"})
+    axes = [a.model_copy(update={"recipe": "paper"}) if a.name == "loss" else a for a in cfg.axes]
+    fast_cfg = cfg.model_copy(update={"full": full, "axes": axes})
+    sweep = _sweep(data)
+
+    def recipe(job):
+        return job.kwargs["overrides"].get("train", {}).get("recipe", "paper")
+
+    assert {recipe(j) for j in seed_jobs(fast_cfg, full, sweep)} == {"fast"}
+    plan = _plan(fast_cfg, False, sweep)
+    by_axis = {}
+    for axis, *_, job in plan:
+        by_axis.setdefault(axis.name, set()).add(recipe(job))
+    assert by_axis == {"loss": {"paper"}, "training window": {"fast"}, "yaw readout": {"fast"}}
+    # the shipped config: the paper's recipe everywhere, the paper-protocol axes marked
+    from parknss.experiments.config import load_experiments_config
+
+    shipped = load_experiments_config()
+    assert shipped.full.recipe == "paper"
+    marked = {a.name for a in shipped.axes if a.recipe == "paper"}
+    assert marked == {"loss", "lr schedule", "training window"}

@@ -108,3 +108,15 @@ def test_fast_config_refusals():
         _fast_cfg(updates=0, finish_epochs=0)
     with pytest.raises(ConfigError):
         _fast_cfg(window=1)
+
+
+def test_fast_fit_identity_leaves_out_what_the_fast_recipe_does_not_read():
+    from parknss.nss.config import fit_identity
+
+    fast = _fast_cfg()
+    ident = fit_identity(fast)
+    for k, v in (("epochs", 77), ("lr", 1e-4), ("schedule", "constant")):
+        assert fit_identity(with_overrides(fast, train={k: v})) == ident
+    assert fit_identity(with_overrides(fast, train={"lr_min": 1e-6})) != ident  # read
+    paper = tiny_config()
+    assert fit_identity(with_overrides(paper, train={"epochs": 77})) != fit_identity(paper)

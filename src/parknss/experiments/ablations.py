@@ -135,9 +135,13 @@ class AblationResult:
         }
 
 
-def option_overrides(opt: AblationOption, budget: Budget, quick: bool) -> Overrides:
+def option_overrides(
+    opt: AblationOption, budget: Budget, quick: bool, recipe: str | None = None
+) -> Overrides:
+    """The option's NSS overrides on the budget's study overrides, with ``recipe`` (the
+    axis's; None: the budget's)."""
     own = opt.quick_overrides if quick and opt.quick_overrides is not None else opt.overrides
-    return merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs}}, own)
+    return merge_overrides(budget.study_overrides(recipe), own)
 
 
 def _base_lr(ov: Overrides) -> float:
@@ -159,7 +163,7 @@ def _plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
     for axis in cfg.axes:
         lrs: list[float | None] = list(budget.loss_lrs) if axis.lr_sweep else [None]
         for opt in axis.options:
-            base = option_overrides(opt, budget, quick)
+            base = option_overrides(opt, budget, quick, axis.recipe)
             for lr in lrs:
                 for k in budget.ablation_folds:
                     ov = merge_overrides(base)

@@ -41,6 +41,18 @@ class Budget(StrictModel):
     sim_scene: int = Field(0, ge=0, description="grid cell drawn in Figs. 8/9")
     tta_folds: list[int] = Field([0, 1, 2, 3], description="CV folds of the recipe comparison")
     overrides: Overrides = Field(default_factory=dict, description="NSS overrides, all fits")
+    recipe: Literal["paper", "fast"] = Field(
+        "paper",
+        description="training recipe of the seed-noise, learning-curve, limiter and ablation "
+        "fits (the floor and what it judges share it); Table II, Fig. 4 and the axes marked "
+        "`recipe` keep theirs",
+    )
+
+    def study_overrides(self, recipe: str | None = None) -> Overrides:
+        """The NSS overrides of a study fit: the budget's, its epoch cap and the recipe
+        (``recipe``, else the budget's)."""
+        train = {"epochs": self.epochs, "recipe": recipe or self.recipe}
+        return merge_overrides(self.overrides, {"train": train})
 
     @field_validator("folds", "ablation_folds", "seeds", "loss_lrs", "tta_folds")
     @classmethod
@@ -84,6 +96,11 @@ class AblationAxis(StrictModel):
     name: str
     options: list[AblationOption]
     lr_sweep: bool = Field(False, description="each option at its best LR of budget.loss_lrs")
+    recipe: Literal["paper", "fast"] | None = Field(
+        None,
+        description="the recipe this axis needs (paper: an axis of the paper's training "
+        "protocol, which the fast recipe does not read); None: the budget's",
+    )
     cost: bool = Field(False, description="report wall-clock cost ratios")
 
     @field_validator("options")

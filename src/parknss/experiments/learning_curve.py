@@ -24,7 +24,7 @@ import numpy as np
 
 from parknss.data.splits import DEFAULT_FOLDS, stratify_problem
 from parknss.errors import DataError
-from parknss.experiments.config import ExperimentsConfig, merge_overrides
+from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, nanmean
 
 
@@ -132,7 +132,7 @@ def learning_curve(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> Learnin
     """Fit every (r, fold) of the grid at the budget's epochs; fit and extrapolate."""
     budget = cfg.budget(quick)
     stratified, note = grid_note(sweep.campaign(), cfg.learning_curve_rs)
-    ov = merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs}})
+    ov = budget.study_overrides()
     grid = [(r, k) for r in cfg.learning_curve_rs for k in budget.folds]
     jobs = [fold_spec(sweep, "leave", k, ov, r=r, name=f"leave{r} fold{k}") for r, k in grid]
     results = sweep.run(jobs, "learning curve")

@@ -17,7 +17,7 @@ import tempfile
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from parknss.experiments.config import ExperimentsConfig, merge_overrides
+from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.noise import NoiseFloor
 from parknss.experiments.sweep import Sweep, fold_spec, nanmean, relative_effect
 
@@ -108,7 +108,7 @@ def limiter_study(
 ) -> LimiterResult:
     """Every fold of the budget under the three limiter variants."""
     budget = cfg.budget(quick)
-    ov = merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs}})
+    ov = budget.study_overrides()
     fn = "parknss.experiments.limiter_study:limiter_job"
     jobs = [fold_spec(sweep, "cv", k, ov, name=f"limiter fold{k}", fn=fn) for k in budget.folds]
     results = sweep.run(jobs, "limiter")

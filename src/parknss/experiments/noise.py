@@ -129,7 +129,7 @@ def seed_jobs(cfg: ExperimentsConfig, budget: Budget, sweep: Sweep):
             sweep,
             ref.split,
             ref.index,
-            merge_overrides(budget.overrides, {"train": {"epochs": budget.epochs, "seed": s}}),
+            merge_overrides(budget.study_overrides(), {"train": {"seed": s}}),
             r=ref.r,
             name=f"seed {s}",
         )

@@ -92,8 +92,13 @@ class TrainConfig(StrictModel):
     dtype: Literal["float32", "float64"] = "float32"
 
 
+FAST_IGNORES: tuple[str, ...] = ("epochs", "lr", "schedule")
+"""Fields of the train section the fast recipe does not read (it has its own)."""
+
+
 class FastConfig(StrictModel):
     """The fast recipe (``train.recipe: fast``; not the paper's, see nss/recipes.py).
+    It reads these instead of ``train.epochs``, ``train.lr`` and ``train.schedule``.
 
     Phase 1: ``updates`` Adam steps, each on ``batch`` windows of ``window`` samples tiled
     over every training trial, LR cosine from ``lr`` to ``train.lr_min``. Phase 2:
@@ -150,13 +155,17 @@ class NSSConfig(StrictModel):
 
 def fit_identity(cfg: NSSConfig) -> dict:
     """The fields of ``cfg`` that decide a fit's numbers, as JSON: all but the torch thread
-    count, and for a paper-recipe fit also without the recipe field and the fast recipe's
-    section (they do not enter it). Resume fingerprints and result-store keys use it."""
+    count; for a paper-recipe fit also without the recipe field and the fast recipe's
+    section, for a fast-recipe fit without the paper recipe's epoch cap, LR and schedule
+    (neither reads the other's). Resume fingerprints and result-store keys use it."""
     doc = cfg.model_dump(mode="json")
     doc["train"].pop("threads", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)
+    else:
+        for k in FAST_IGNORES:
+            doc["train"].pop(k, None)
     return doc
 
 
