@@ -99,7 +99,7 @@ def test_limiter_variants_share_one_model(tiny):
 
 
 def test_limiter_job_unlimited_equals_the_fold_errors(tiny):
-    from parknss.experiments.limiter_study import limiter_job
+    from parknss.experiments.folds import limiter_job
 
     data, _ = tiny
     out = limiter_job(

@@ -11,6 +11,9 @@ whole length. Its arguments and its result are plain JSON, so the same job runs
 in-process, on the local pool or on Ray and is cached by the executor under the hash of
 its arguments.
 
+:func:`limiter_job` is the same fit scored three ways (without the inference limiter and
+with its two forms), the unit of the limiter study.
+
 Models: ``"nss"`` (the NSS with the given config overrides), ``"linear"`` (the
 least-squares linear state-space baseline of :mod:`parknss.nss.linear`). The direct-yaw
 NSS is ``"nss"`` with ``{"model": {"residual_yaw": false}}``.
@@ -18,6 +21,7 @@ NSS is ``"nss"`` with ``{"model": {"residual_yaw": false}}``.
 
 from __future__ import annotations
 
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -166,3 +170,41 @@ def fold_job(
         cpu_s=res.cpu_s,
         model_dir=saved,
     ).to_json()
+
+
+VARIANTS: tuple[str, ...] = ("none", "reconstructed", "residual")
+"""The limiter variants of :func:`limiter_job` (paper §V-B)."""
+
+
+def limiter_job(**fold_kwargs: Any) -> dict[str, Any]:
+    """Fit a fold (:func:`fold_job`), then score the same model under each limiter variant:
+    none, clamping the reconstructed yaw rate, clamping the residual channel (the limiter
+    study, :mod:`parknss.experiments.limiter_study`).
+
+    Returns ``{"fold": FoldResult JSON, "variants": {variant: OpenLoopErrors JSON}}``.
+    """
+    from parknss.metrics.errors import open_loop_errors
+    from parknss.nss.campaigns import load_campaign
+    from parknss.nss.checkpoint import load_model
+    from parknss.nss.config import LimiterConfig
+    from parknss.nss.predict import predict_trials
+
+    with tempfile.TemporaryDirectory(prefix="parknss-limiter-") as tmp:
+        fold = fold_job(**fold_kwargs, save_dir=tmp)
+        model = load_model(tmp).model
+    campaign = load_campaign(fold_kwargs.get("data"))
+    f = make_fold(
+        campaign,
+        fold_kwargs.get("split", "cv"),
+        fold_kwargs.get("index", 0),
+        fold_kwargs.get("r", 1),
+        fold_kwargs.get("split_seed"),
+    )
+    val = [campaign[i] for i in f.val]
+    variants = {}
+    for v in VARIANTS:
+        lim = None if v == "none" else LimiterConfig(enabled=True, mode=v)
+        pred = predict_trials(model, val, limiter=lim)
+        variants[v] = open_loop_errors(pred, val, fold["window_length"]).to_json()
+    fold["model_dir"] = None
+    return {"fold": fold, "variants": variants}

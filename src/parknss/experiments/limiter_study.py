@@ -1,6 +1,6 @@
 """The inference-limiter study (paper §V-B): the same fold models with and without it.
 
-Each job fits one CV fold (through :func:`~parknss.experiments.folds.fold_job`), then rolls
+Each job (:func:`~parknss.experiments.folds.limiter_job`) fits one CV fold, then rolls
 the *same* model out over the held-out trials three ways: without a limiter, with the
 gear-conditioned kinematic limiter clamping the reconstructed yaw rate (the correct
 form), and with the limiter clamping the residual channel instead (the form the paper
@@ -13,48 +13,14 @@ not finite.
 from __future__ import annotations
 
 import math
-import tempfile
 from dataclasses import asdict, dataclass
-from typing import Any
 
 from parknss.experiments.config import ExperimentsConfig
+from parknss.experiments.folds import VARIANTS
 from parknss.experiments.noise import NoiseFloor
 from parknss.experiments.sweep import Sweep, fold_spec, nanmean, relative_effect
 
-VARIANTS: tuple[str, ...] = ("none", "reconstructed", "residual")
-
-
-def limiter_job(**fold_kwargs: Any) -> dict[str, Any]:
-    """Fit a fold, then score its model under each limiter variant (JSON result).
-
-    Returns ``{"fold": FoldResult JSON, "variants": {variant: OpenLoopErrors JSON}}``.
-    """
-    from parknss.experiments.folds import fold_job, make_fold
-    from parknss.metrics.errors import open_loop_errors
-    from parknss.nss.campaigns import load_campaign
-    from parknss.nss.checkpoint import load_model
-    from parknss.nss.config import LimiterConfig
-    from parknss.nss.predict import predict_trials
-
-    with tempfile.TemporaryDirectory(prefix="parknss-limiter-") as tmp:
-        fold = fold_job(**fold_kwargs, save_dir=tmp)
-        model = load_model(tmp).model
-    campaign = load_campaign(fold_kwargs.get("data"))
-    f = make_fold(
-        campaign,
-        fold_kwargs.get("split", "cv"),
-        fold_kwargs.get("index", 0),
-        fold_kwargs.get("r", 1),
-        fold_kwargs.get("split_seed"),
-    )
-    val = [campaign[i] for i in f.val]
-    variants = {}
-    for v in VARIANTS:
-        lim = None if v == "none" else LimiterConfig(enabled=True, mode=v)
-        pred = predict_trials(model, val, limiter=lim)
-        variants[v] = open_loop_errors(pred, val, fold["window_length"]).to_json()
-    fold["model_dir"] = None
-    return {"fold": fold, "variants": variants}
+LIMITER_JOB = "parknss.experiments.folds:limiter_job"
 
 
 def _get(errors: dict, key: str) -> float:
@@ -109,8 +75,10 @@ def limiter_study(
     """Every fold of the budget under the three limiter variants."""
     budget = cfg.budget(quick)
     ov = budget.study_overrides()
-    fn = "parknss.experiments.limiter_study:limiter_job"
-    jobs = [fold_spec(sweep, "cv", k, ov, name=f"limiter fold{k}", fn=fn) for k in budget.folds]
+    jobs = [
+        fold_spec(sweep, "cv", k, ov, name=f"limiter fold{k}", fn=LIMITER_JOB)
+        for k in budget.folds
+    ]
     results = sweep.run(jobs, "limiter")
     scores = []
     for v in VARIANTS:

@@ -55,8 +55,7 @@ CODE_FILES: tuple[str, ...] = (
     "metrics/errors.py",  # the scores
     "signals.py",  # units, the blind zone, the MSE factors
     "vehicle.py",  # the kinematic prior of the residual yaw readout
-    "experiments/folds.py",  # the fold job
-    "experiments/limiter_study.py",  # the limiter job
+    "experiments/folds.py",  # the fold job and the limiter job
 )
 """The training code: files (globs) under ``src/parknss/`` whose edits change a fit's
 numbers. Editing any of them changes :func:`code_version`, so every stored fit misses.

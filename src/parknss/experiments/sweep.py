@@ -25,6 +25,8 @@ from parknss.experiments.config import Overrides
 from parknss.nss.config import NSSConfig
 
 FOLD_JOB = "parknss.experiments.folds:fold_job"
+STATEFUL_JOBS: tuple[str, ...] = (FOLD_JOB, "parknss.experiments.folds:limiter_job")
+"""Jobs that take a ``state_dir`` (they fit through :func:`~parknss.experiments.folds.fold_job`)."""
 
 
 @dataclass
@@ -109,7 +111,7 @@ def fold_spec(
         "overrides": canonical_overrides(overrides),
         **extra,
     }
-    if sweep.state_root is not None and fn == FOLD_JOB:
+    if sweep.state_root is not None and fn in STATEFUL_JOBS:
         kwargs["state_dir"] = str(Path(sweep.state_root) / Job(fn, kwargs).key())
     return Job(fn, kwargs, name or f"{split} r{r} fold{index}")
 
