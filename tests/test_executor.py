@@ -77,3 +77,25 @@ def test_a_store_behind_the_cache(tmp_path):
                      tally=tally)
     assert again == first and tally.to_json() == {"cache": 0, "store": 2, "computed": 2}
     assert not ResultCache(tmp_path / "b").get(jobs[0])[0]  # a stored result is not copied
+
+
+def test_pool_stores_each_result_as_soon_as_it_finishes():
+    """A long first job does not hold back the store writes of the short ones behind it
+    (a study killed mid-way keeps every fit that completed); results keep job order."""
+
+    class Recorder:
+        def __init__(self):
+            self.order = []
+
+        def get(self, job):
+            return False, None
+
+        def put(self, job, result, wall_s, cpu_s):
+            self.order.append(job.kwargs["seed"])
+
+    jobs = [Job(PROBE, {"seed": 0, "steps": 5000}), *(
+        Job(PROBE, {"seed": s, "steps": 20}) for s in (1, 2, 3))]  # fmt: skip
+    store = Recorder()
+    res = run_jobs(jobs, workers=2, progress=False, store=store)
+    assert [r["seed"] for r in res] == [0, 1, 2, 3]
+    assert store.order[-1] == 0 and sorted(store.order) == [0, 1, 2, 3]

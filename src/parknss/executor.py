@@ -213,10 +213,15 @@ def _run_local(
         return
     from joblib import Parallel, delayed, parallel_config
 
+    # results as they finish (not in submission order), so each is cached and stored as
+    # soon as it exists: a long study killed mid-way keeps every fit that completed
     with parallel_config(backend="loky", inner_max_num_threads=1):
-        run = Parallel(n_jobs=workers, return_as="generator")
-        gen = run(delayed(execute_timed)(j) for j in jobs)
-        yield from zip(index, gen, strict=True)
+        run = Parallel(n_jobs=workers, return_as="generator_unordered")
+        yield from run(delayed(_execute_indexed)(i, j) for i, j in zip(index, jobs, strict=True))
+
+
+def _execute_indexed(i: int, job: Job) -> tuple[int, Timed]:
+    return i, execute_timed(job)
 
 
 def _run_ray(
