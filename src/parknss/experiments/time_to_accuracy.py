@@ -45,13 +45,13 @@ class Curve:
         cpu = h.get("cpu_s") or []
         if len(cpu) != len(h["raw"]) or any(c is None for c in cpu) or res.get("cpu_s") is None:
             raise ValueError("the fit has no CPU times (fitted before they were recorded)")
-        return cls(list(cpu), list(h["raw"]), list(h["smooth"]), float(res["cpu_s"]),
-                   min(h["smooth"]))  # fmt: skip
+        return cls(
+            list(cpu), list(h["raw"]), list(h["smooth"]), float(res["cpu_s"]), min(h["smooth"])
+        )
 
     def reach(self, target: float) -> float | None:
         """CPU time (s) of the first point whose smoothed criterion is <= target."""
-        return next((c for c, s in zip(self.cpu_s, self.smooth, strict=True) if s <= target),
-                    None)  # fmt: skip
+        return next((c for c, s in zip(self.cpu_s, self.smooth, strict=True) if s <= target), None)
 
 
 @dataclass
@@ -83,8 +83,12 @@ class FoldTTA:
 
     def to_json(self) -> dict:
         d = asdict(self)
-        d.update(target=self.target, reach_cpu_s=self.reach_cpu_s,
-                 speedup_reach=self.speedup_reach, speedup_total=self.speedup_total)  # fmt: skip
+        d.update(
+            target=self.target,
+            reach_cpu_s=self.reach_cpu_s,
+            speedup_reach=self.speedup_reach,
+            speedup_total=self.speedup_total,
+        )
         return d
 
 
@@ -96,11 +100,22 @@ class TTAResult:
     def rows(self) -> list[list]:
         out = []
         for f in self.folds:
-            out.append([
-                f"fold {f.index}", f.paper.total_cpu_s, f.target, f.paper_score.vx,
-                f.paper_score.yaw, f.fast.total_cpu_s, f.fast.best, f.fast_score.vx,
-                f.fast_score.yaw, f.reach_cpu_s, f.speedup_reach, f.speedup_total,
-            ])  # fmt: skip
+            out.append(
+                [
+                    f"fold {f.index}",
+                    f.paper.total_cpu_s,
+                    f.target,
+                    f.paper_score.vx,
+                    f.paper_score.yaw,
+                    f.fast.total_cpu_s,
+                    f.fast.best,
+                    f.fast_score.vx,
+                    f.fast_score.yaw,
+                    f.reach_cpu_s,
+                    f.speedup_reach,
+                    f.speedup_total,
+                ]
+            )
         return out
 
     def met(self) -> bool:
@@ -112,15 +127,27 @@ class TTAResult:
         )
 
     def to_json(self) -> dict:
-        return {"folds": [f.to_json() for f in self.folds],
-                "required_speedup": self.required_speedup, "met": self.met()}  # fmt: skip
+        return {
+            "folds": [f.to_json() for f in self.folds],
+            "required_speedup": self.required_speedup,
+            "met": self.met(),
+        }
 
 
 COLUMNS = [
-    "", "paper CPU [s]", "paper criterion", "paper vx", "paper ω_z", "fast CPU [s]",
-    "fast criterion", "fast vx", "fast ω_z", "fast reaches at [s]", "speed-up (reach)",
+    "",
+    "paper CPU [s]",
+    "paper criterion",
+    "paper vx",
+    "paper ω_z",
+    "fast CPU [s]",
+    "fast criterion",
+    "fast vx",
+    "fast ω_z",
+    "fast reaches at [s]",
+    "speed-up (reach)",
     "speed-up (total)",
-]  # fmt: skip
+]
 
 
 def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTAResult:
@@ -130,8 +157,9 @@ def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTARe
     jobs = []
     for i in b.tta_folds:
         jobs.append(fold_spec(sweep, "cv", i, paper_ov, name=f"paper recipe fold {i}"))
-        jobs.append(fold_spec(sweep, "cv", i, merge_overrides(paper_ov, FAST),
-                              name=f"fast recipe fold {i}"))  # fmt: skip
+        jobs.append(
+            fold_spec(sweep, "cv", i, merge_overrides(paper_ov, FAST), name=f"fast recipe fold {i}")
+        )
     res = sweep.run(jobs, "time to accuracy")
     folds = [
         FoldTTA(

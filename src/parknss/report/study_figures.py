@@ -117,7 +117,7 @@ def draw_time_to_accuracy(result, path: str | Path) -> Path:
         for curve, color, label in ((f.paper, "C0", "paper"), (f.fast, "C1", "fast")):
             ax.plot(curve.cpu_s, curve.raw, ".", color=color, alpha=0.2, ms=2)
             ax.plot(curve.cpu_s, curve.smooth, "-", color=color,
-                    label=f"{label} ({curve.total_cpu_s:.0f} s)")  # fmt: skip
+                    label=f"{label} ({curve.total_cpu_s:.0f} s)")
         ax.axhline(f.target, color="k", ls=":", lw=1, label=f"paper final {f.target:.4f}")
         if f.reach_cpu_s is not None:
             ax.axvline(f.reach_cpu_s, color="C1", ls="--", lw=1,
