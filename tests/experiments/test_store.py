@@ -258,3 +258,28 @@ def test_sweep_fold_jobs_keep_their_training_state(tmp_path):
     assert store.entry_key(kept)[0] == store.entry_key(plain)[0]
     probe = fold_spec(Sweep(state_root=tmp_path), "cv", 1, {}, fn=PROBE)
     assert "state_dir" not in probe.kwargs  # only fold jobs take one
+
+
+def test_time_to_accuracy_of_two_known_curves():
+    from parknss.errors import DataError
+    from parknss.experiments.sweep import FoldScore
+    from parknss.experiments.time_to_accuracy import Curve, FoldTTA, TTAResult
+
+    def fit(cpu, smooth):
+        return {"history": {"raw": smooth, "smooth": smooth, "cpu_s": cpu}, "cpu_s": cpu[-1]}
+
+    paper = Curve.from_result(fit([100.0, 400.0, 800.0], [0.3, 0.2, 0.1]))
+    fast = Curve.from_result(fit([10.0, 20.0, 50.0], [0.2, 0.1, 0.08]))
+    score = FoldScore(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1, 12)
+    f = FoldTTA(0, paper, fast, score, score)
+    assert (f.target, f.reach_cpu_s) == (0.1, 20.0)  # the fast fit's first point at 0.1
+    assert (f.speedup_reach, f.speedup_total) == (40.0, 16.0)
+    assert TTAResult([f], 8.0).met() and not TTAResult([f], 50.0).met()
+    doc = f.to_json()
+    assert doc["paper"]["best"] == 0.1 and doc["fast"]["best"] == 0.08
+    slow = FoldTTA(0, fast, paper, score, score)  # the other way round: never reaches 0.08
+    assert slow.reach_cpu_s is None and not TTAResult([slow], 1.0).met()
+    old = fit([10.0, 20.0], [0.2, 0.1])
+    old["history"]["cpu_s"] = [None, None]
+    with pytest.raises(DataError, match="no CPU times"):
+        Curve.from_result(old)

@@ -18,9 +18,7 @@ from dataclasses import asdict, dataclass
 from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.folds import VARIANTS
 from parknss.experiments.noise import NoiseFloor
-from parknss.experiments.sweep import Sweep, fold_spec, nanmean, relative_effect
-
-LIMITER_JOB = "parknss.experiments.folds:limiter_job"
+from parknss.experiments.sweep import LIMITER_JOB, Sweep, fold_spec, nanmean, relative_effect
 
 
 def _get(errors: dict, key: str) -> float:

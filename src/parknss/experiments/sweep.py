@@ -25,7 +25,8 @@ from parknss.experiments.config import Overrides
 from parknss.nss.config import NSSConfig
 
 FOLD_JOB = "parknss.experiments.folds:fold_job"
-STATEFUL_JOBS: tuple[str, ...] = (FOLD_JOB, "parknss.experiments.folds:limiter_job")
+LIMITER_JOB = "parknss.experiments.folds:limiter_job"
+STATEFUL_JOBS: tuple[str, ...] = (FOLD_JOB, LIMITER_JOB)
 """Jobs that take a ``state_dir`` (they fit through :func:`~parknss.experiments.folds.fold_job`)."""
 
 

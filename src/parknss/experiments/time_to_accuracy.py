@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+from parknss.errors import DataError
 from parknss.experiments.config import ExperimentsConfig, merge_overrides
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec
 
@@ -37,17 +38,22 @@ class Curve:
     raw: list[float]
     smooth: list[float]
     total_cpu_s: float
-    best: float
+
+    @property
+    def best(self) -> float:
+        """The lowest smoothed criterion (the one the fit's final model was chosen at)."""
+        return min(self.smooth)
 
     @classmethod
     def from_result(cls, res: dict) -> Curve:
         h = res["history"]
         cpu = h.get("cpu_s") or []
         if len(cpu) != len(h["raw"]) or any(c is None for c in cpu) or res.get("cpu_s") is None:
-            raise ValueError("the fit has no CPU times (fitted before they were recorded)")
-        return cls(
-            list(cpu), list(h["raw"]), list(h["smooth"]), float(res["cpu_s"]), min(h["smooth"])
-        )
+            raise DataError(
+                f"{res.get('model', 'fit')} fold {res.get('index')}: no CPU times in its "
+                "history (fitted before they were recorded); refit it (--refit)"
+            )
+        return cls(list(cpu), list(h["raw"]), list(h["smooth"]), float(res["cpu_s"]))
 
     def reach(self, target: float) -> float | None:
         """CPU time (s) of the first point whose smoothed criterion is <= target."""
@@ -83,6 +89,7 @@ class FoldTTA:
 
     def to_json(self) -> dict:
         d = asdict(self)
+        d["paper"]["best"], d["fast"]["best"] = self.paper.best, self.fast.best
         d.update(
             target=self.target,
             reach_cpu_s=self.reach_cpu_s,
