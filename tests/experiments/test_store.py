@@ -19,10 +19,12 @@ from parknss.experiments.store import (
     code_files,
     code_version,
     entries,
+    fit_key,
     open_store,
     store_dir,
 )
 from parknss.experiments.studies import StudyInputs, run_study
+from parknss.experiments.sweep import FOLD_JOB
 
 PROBE = "parknss.experiments.probe:probe_fit"
 
@@ -251,13 +253,29 @@ def test_sweep_fold_jobs_keep_their_training_state(tmp_path):
     plain = fold_spec(Sweep(), "cv", 1, {"train": {"epochs": 5}})
     kept = fold_spec(Sweep(state_root=tmp_path), "cv", 1, {"train": {"epochs": 5}})
     assert "state_dir" not in plain.kwargs
-    assert kept.kwargs["state_dir"] == str(tmp_path / plain.key())  # one folder per fit
+    assert kept.kwargs["state_dir"] == str(tmp_path / fit_key(FOLD_JOB, plain.kwargs))
     other = fold_spec(Sweep(state_root=tmp_path), "cv", 2, {"train": {"epochs": 5}})
     assert other.kwargs["state_dir"] != kept.kwargs["state_dir"]
     store = _store(tmp_path)  # where the state is kept does not decide the numbers
     assert store.entry_key(kept)[0] == store.entry_key(plain)[0]
     probe = fold_spec(Sweep(state_root=tmp_path), "cv", 1, {}, fn=PROBE)
     assert "state_dir" not in probe.kwargs  # only fold jobs take one
+
+
+def test_a_fit_keeps_its_state_folder_under_any_spelling_and_loses_it_when_retuned(tmp_path):
+    from parknss.experiments.sweep import Sweep, fold_spec
+
+    sw = Sweep(state_root=tmp_path)
+
+    def state(overrides):
+        return fold_spec(sw, "cv", 1, overrides).kwargs["state_dir"]
+
+    paper = state({})
+    assert state({"train": {"epochs": 3200, "recipe": "paper"}}) == paper  # defaults spelled
+    assert state({"fast": {"window": 64}}) == paper  # a paper fit does not read the fast section
+    fast = state({"train": {"recipe": "fast"}})
+    assert fast != paper
+    assert state({"train": {"recipe": "fast"}, "fast": {"window": 64}}) != fast  # retuned
 
 
 def test_time_to_accuracy_of_two_known_curves():

@@ -127,6 +127,16 @@ def key_kwargs(kwargs: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def fit_key(fn: str, kwargs: Mapping[str, Any]) -> str:
+    """The identity of the fit a job makes, data and code aside: the hash of its
+    :func:`key_kwargs` with the function's defaults filled in. Names the folder of a sweep
+    fit's resumable training state, so that two spellings of one fit share it and a fit
+    whose resolved config changed (a default retuned) gets a fresh one instead of a
+    state it would refuse."""
+    doc = {"fn": fn, "kwargs": key_kwargs(bound_kwargs(fn, kwargs))}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:24]
+
+
 def store_key(fn: str, kwargs: Mapping[str, Any], data_hash: str, code: str) -> str:
     """The store key of a job (``kwargs`` from :func:`key_kwargs`)."""
     doc = {"fn": fn, "kwargs": kwargs, "data_hash": data_hash, "code_version": code}

@@ -101,8 +101,8 @@ def fold_spec(
 ) -> Job:
     """A fold job (or a job of ``fn`` with the same arguments plus ``extra``); the overrides
     are canonicalised (:func:`canonical_overrides`). A fold job of a sweep with a
-    ``state_root`` checkpoints its fit under ``state_root/<job hash>`` and resumes from
-    there (a long study across sittings)."""
+    ``state_root`` checkpoints its fit under ``state_root/<fit key>`` and resumes from
+    there (a long study across sittings; :func:`~parknss.experiments.store.fit_key`)."""
     kwargs: dict[str, Any] = {
         "split": split,
         "index": index,
@@ -113,7 +113,9 @@ def fold_spec(
         **extra,
     }
     if sweep.state_root is not None and fn in STATEFUL_JOBS:
-        kwargs["state_dir"] = str(Path(sweep.state_root) / Job(fn, kwargs).key())
+        from parknss.experiments.store import fit_key
+
+        kwargs["state_dir"] = str(Path(sweep.state_root) / fit_key(fn, kwargs))
     return Job(fn, kwargs, name or f"{split} r{r} fold{index}")
 
 

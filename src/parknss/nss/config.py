@@ -107,10 +107,10 @@ class FastConfig(StrictModel):
     and every ``train.val_every`` steps in phase 2.
     """
 
-    window: int = Field(256, ge=2, description="samples per phase-1 window (2.56 s at 100 Hz)")
-    batch: int = Field(32, ge=1, description="windows per phase-1 update")
+    window: int = Field(1024, ge=2, description="samples per phase-1 window (10.24 s at 100 Hz)")
+    batch: int = Field(8, ge=1, description="windows per phase-1 update")
     updates: int = Field(2000, ge=0, description="phase-1 updates")
-    lr: float = Field(3.0e-3, gt=0.0, description="phase-1 initial LR (cosine to lr_min)")
+    lr: float = Field(2.0e-3, gt=0.0, description="phase-1 initial LR (cosine to lr_min)")
     val_every: int = Field(20, ge=1, description="validate every N phase-1 updates")
     finish_epochs: int = Field(100, ge=0, description="phase-2 full-batch steps")
     finish_lr: float = Field(5.0e-4, gt=0.0, description="phase-2 initial LR (cosine)")
