@@ -8,7 +8,7 @@ import math
 import pytest
 
 from helpers.experiments import tiny_setup
-from parknss.experiments.ablations import ablations, n_fits
+from parknss.experiments.ablations import ablation_jobs, ablations
 from parknss.experiments.config import load_experiments_config
 from parknss.experiments.convergence import convergence
 from parknss.experiments.learning_curve import learning_curve
@@ -75,7 +75,7 @@ def test_ablations_share_the_baseline_and_sweep_lr(tiny):
     res = ablations(cfg, False, sweep, floor)
     # baseline shared by 3 axes, MAE at the default LR is the baseline: 1 + MSE x 2 LRs
     # + MAE at the other LR + longest window + direct yaw
-    assert n_fits(cfg, False, sweep) == 6
+    assert len(ablation_jobs(cfg, False, sweep)) == 6
     base = [ax.baseline() for ax in res.axes]
     assert all(b.mean("vx") == base[0].mean("vx") for b in base[1:] if b.lr in (None, 2e-3))
     loss = res.axis("loss")

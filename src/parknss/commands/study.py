@@ -8,8 +8,8 @@ campaign, configs and floor shares and resumes; an ``--out`` holding anything el
 refused unless ``--overwrite`` (:func:`parknss.experiments.studies.run_study`);
 ``--floor`` names the seed-noise floor (``measure``, ``paper`` or a seed-noise JSON);
 fits are read from the result store (``--store DIR|off``; ``--refit``: fit them all).
-``parknss study estimate`` counts each study's fits and epochs and converts them to CPU
-hours.
+``parknss study estimate`` lists each study's fits, those the result store holds, and the
+CPU hours of the rest (:mod:`parknss.experiments.plan`).
 """
 
 from __future__ import annotations
@@ -82,15 +82,16 @@ def register(app: typer.Typer) -> None:
     def estimate_cmd(
         quick: bool = quick_opt, config: Path | None = config_opt, data: Path | None = data_opt,
         sec_per_epoch: float | None = typer.Option(
-            None, "--sec-per-epoch", help="Skip the timing fit; use this s/epoch."
+            None, "--sec-per-epoch", help="Skip timing epochs; every engine costs this s/epoch."
         ),
+        sec_per_update: float | None = typer.Option(
+            None, "--sec-per-update", help="Skip timing fast-recipe updates; s/update."
+        ),
+        store: str | None = store_opt,
         as_json: bool = json_opt,
     ) -> None:
-        """Fits and CPU hours of each study at the budget (one core per fit)."""
-        from parknss.experiments.studies import estimate, estimate_text
+        """Each study's fits, those in the result store, and CPU hours of the rest."""
+        from parknss.experiments.studies import estimate
 
-        spe, rows = estimate(quick, config, data, sec_per_epoch, _log)
-        if as_json:
-            typer.echo(json.dumps({"sec_per_epoch": spe, "studies": rows}, indent=2))
-        else:
-            typer.echo(estimate_text(spe, rows))
+        est = estimate(quick, config, data, store, sec_per_epoch, sec_per_update, _log)
+        typer.echo(json.dumps(est.to_json(), indent=2) if as_json else est.text())

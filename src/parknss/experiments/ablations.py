@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
+from parknss.executor import Job
 from parknss.experiments.config import (
     AblationAxis,
     AblationOption,
@@ -180,9 +181,12 @@ def _plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
     return plan
 
 
-def n_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> int:
-    """Distinct fits of the study (shared configurations counted once)."""
-    return len({p[-1].key() for p in _plan(cfg, quick, sweep)})
+def ablation_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
+    """Every fit of the study, shared configurations once (the first spelling kept)."""
+    jobs: dict[str, Job] = {}
+    for *_, job in _plan(cfg, quick, sweep):
+        jobs.setdefault(job.key(), job)
+    return list(jobs.values())
 
 
 def _metric(res: dict, key: str) -> float:

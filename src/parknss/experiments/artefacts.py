@@ -153,18 +153,16 @@ def fig4_artefact(ctx: RunContext) -> ArtefactResult:
 
 @register("table2", "Table II and Fig. 5: four-fold cross-validation", "§V-A, Table II, Fig. 5")
 def table2_artefact(ctx: RunContext) -> ArtefactResult:
-    from parknss.experiments.config import merge_overrides
     from parknss.experiments.cv import COLUMNS, run_cv
     from parknss.nss.checkpoint import load_model
     from parknss.nss.predict import predict_trials
     from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
 
     b = ctx.experiments_config().budget(ctx.quick)
-    ov = merge_overrides(b.overrides, {"train": {"epochs": b.convergence_epochs}})
     models = ctx.out_dir / "cv_models"
     res = run_cv(
         data=str(ctx.data) if ctx.data else None,
-        overrides=ov,
+        overrides=b.deployment_overrides(),
         executor=ctx.executor,
         workers=ctx.workers,
         address=ctx.address,

@@ -54,6 +54,13 @@ class Budget(StrictModel):
         train = {"epochs": self.epochs, "recipe": recipe or self.recipe}
         return merge_overrides(self.overrides, {"train": train})
 
+    def deployment_overrides(self) -> Overrides:
+        """The NSS overrides of a fit of the paper's deployment protocol (Table II, Fig. 4,
+        the paper side of the time-to-accuracy comparison): the budget's, the deployment
+        cap ``convergence_epochs`` and the paper's recipe whatever the NSS config says."""
+        train = {"epochs": self.convergence_epochs, "recipe": "paper"}
+        return merge_overrides(self.overrides, {"train": train})
+
     @field_validator("folds", "ablation_folds", "seeds", "loss_lrs", "tta_folds")
     @classmethod
     def _nonempty(cls, v: list) -> list:

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from parknss.experiments.config import ExperimentsConfig, merge_overrides
+from parknss.executor import Job
+from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec
 
 
@@ -42,12 +43,18 @@ class ConvergenceResult:
         return d
 
 
+def convergence_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
+    """The one fit of the probe: the configured fold at the deployment protocol (the same
+    fit as that fold's Table II NSS fit when the fold is a CV one)."""
+    ref = cfg.convergence_split
+    ov = cfg.budget(quick).deployment_overrides()
+    return [fold_spec(sweep, ref.split, ref.index, ov, r=ref.r)]
+
+
 def convergence(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> ConvergenceResult:
     """Fit the convergence fold at the budget's ``convergence_epochs``."""
-    budget = cfg.budget(quick)
     ref = cfg.convergence_split
-    ov = merge_overrides(budget.overrides, {"train": {"epochs": budget.convergence_epochs}})
-    (res,) = sweep.run([fold_spec(sweep, ref.split, ref.index, ov, r=ref.r)], "convergence")
+    (res,) = sweep.run(convergence_jobs(cfg, quick, sweep), "convergence")
     h = res["history"]
     return ConvergenceResult(
         ref.split,
@@ -57,6 +64,6 @@ def convergence(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> Convergenc
         list(h["smooth"]),
         list(h["output"]),
         res.get("best_epoch"),
-        budget.convergence_epochs,
+        cfg.budget(quick).convergence_epochs,
         FoldScore.from_json(res),
     )

@@ -24,6 +24,7 @@ import numpy as np
 
 from parknss.data.splits import DEFAULT_FOLDS, stratify_problem
 from parknss.errors import DataError
+from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, nanmean
 
@@ -128,14 +129,23 @@ def grid_note(
     )
 
 
+def curve_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[tuple[int, Job]]:
+    """(r, job) for every (r, fold) of the grid, at the budget's study overrides."""
+    budget = cfg.budget(quick)
+    ov = budget.study_overrides()
+    return [
+        (r, fold_spec(sweep, "leave", k, ov, r=r, name=f"leave{r} fold{k}"))
+        for r in cfg.learning_curve_rs
+        for k in budget.folds
+    ]
+
+
 def learning_curve(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> LearningCurveResult:
     """Fit every (r, fold) of the grid at the budget's epochs; fit and extrapolate."""
     budget = cfg.budget(quick)
     stratified, note = grid_note(sweep.campaign(), cfg.learning_curve_rs)
-    ov = budget.study_overrides()
-    grid = [(r, k) for r in cfg.learning_curve_rs for k in budget.folds]
-    jobs = [fold_spec(sweep, "leave", k, ov, r=r, name=f"leave{r} fold{k}") for r, k in grid]
-    results = sweep.run(jobs, "learning curve")
+    grid = curve_jobs(cfg, quick, sweep)
+    results = sweep.run([j for _, j in grid], "learning curve")
     points = []
     for r in cfg.learning_curve_rs:
         scores = [

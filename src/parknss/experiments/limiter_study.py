@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.folds import VARIANTS
 from parknss.experiments.noise import NoiseFloor
@@ -67,17 +68,22 @@ class LimiterResult:
         }
 
 
+def limiter_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
+    """One limiter job per fold of the budget (each fits once, rolls out three ways)."""
+    budget = cfg.budget(quick)
+    ov = budget.study_overrides()
+    return [
+        fold_spec(sweep, "cv", k, ov, name=f"limiter fold{k}", fn=LIMITER_JOB)
+        for k in budget.folds
+    ]
+
+
 def limiter_study(
     cfg: ExperimentsConfig, quick: bool, sweep: Sweep, floor: NoiseFloor
 ) -> LimiterResult:
     """Every fold of the budget under the three limiter variants."""
     budget = cfg.budget(quick)
-    ov = budget.study_overrides()
-    jobs = [
-        fold_spec(sweep, "cv", k, ov, name=f"limiter fold{k}", fn=LIMITER_JOB)
-        for k in budget.folds
-    ]
-    results = sweep.run(jobs, "limiter")
+    results = sweep.run(limiter_jobs(cfg, quick, sweep), "limiter")
     scores = []
     for v in VARIANTS:
         errs = [r["variants"][v] for r in results]

@@ -10,8 +10,8 @@ writes ``<name>.json`` and the study's figure to ``out`` and returns a :class:`S
 judge effects against the seed-noise floor take it from ``floor``: ``measure`` (run the
 seed-noise study, cached in the same folder), ``paper`` (the paper's CVs, labelled as
 such) or a seed-noise JSON written by ``parknss study seed-noise``. :func:`estimate`
-counts each study's fits and epochs and converts them to CPU hours with a measured
-paper-size seconds-per-epoch.
+lists each study's fits, the store's share and the CPU hours of the rest
+(:mod:`parknss.experiments.plan`).
 
 ``out`` is a run folder of ``parknss study`` (:func:`parknss.outputs.run_folder`) whose
 arguments are the budget, the campaign, the configs (their digests too) and the floor,
@@ -215,54 +215,19 @@ def study_text(run: StudyRun) -> str:
 
 
 def estimate(
-    quick: bool, config: Path | None, data: Path | None, sec_per_epoch: float | None,
+    quick: bool, config: Path | None, data: Path | None, store: str | None,
+    sec_per_epoch: float | None = None, sec_per_update: float | None = None,
     log: Callable[[str], None] = _quiet,
-) -> tuple[float, list[dict]]:
-    """(CPU s/epoch, per study: fits, epochs, CPU hours) at the budget (paper-size CPU
-    s/epoch, measured by a 5-epoch fit unless given; Euler on the fused engine: the eager
-    integrator options of Table III cost several times more per epoch)."""
-    from parknss.experiments.ablations import n_fits
+):
+    """``parknss study estimate``: every study's fits at the budget, the result store's
+    share and the CPU hours of the rest (:func:`parknss.experiments.plan.estimate`)."""
     from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.plan import estimate as plan_estimate
+    from parknss.experiments.store import open_store
     from parknss.experiments.sweep import Sweep
 
     cfg = load_experiments_config(config)
     checked_campaign(data, "parknss study estimate")
-    b = cfg.budget(quick)
-    if sec_per_epoch is None:
-        from parknss.experiments.folds import fold_job
-
-        def cpu_of(epochs: int) -> float:
-            ov = {**b.overrides, "train": {**b.overrides.get("train", {}), "epochs": epochs}}
-            cpu0 = time.process_time()
-            fold_job("cv", 0, data=str(data) if data else None, overrides=ov)
-            return time.process_time() - cpu0
-
-        n = 6
-        log(f"timing paper-size fits of 1 and {n} epochs (process CPU time) ...")
-        # CPU time, not wall (on a shared machine the wall clock measures the neighbours);
-        # the difference removes loading and the epoch-1 validation; n - 1 = 5 epochs add
-        # one validation, the val_every = 5 rate. A first fit warms up (imports, scripting).
-        cpu_of(1)
-        short = cpu_of(1)
-        sec_per_epoch = (cpu_of(n) - short) / (n - 1)
     sweep = Sweep(data=str(data) if data else None, progress=False)
-    rows = [
-        ("seed-noise", len(b.seeds), b.epochs),
-        ("learning-curve", len(cfg.learning_curve_rs) * len(b.folds), b.epochs),
-        ("ablations", n_fits(cfg, quick, sweep), b.epochs),
-        ("limiter", len(b.folds), b.epochs),
-        ("convergence", 1, b.convergence_epochs),
-        ("table2 (nss + direct yaw)", 8, b.convergence_epochs),
-    ]
-    return sec_per_epoch, [
-        {"study": s, "fits": f, "epochs": e, "cpu_h": f * e * sec_per_epoch / 3600.0}
-        for s, f, e in rows
-    ]
-
-
-def estimate_text(sec_per_epoch: float, rows: list[dict]) -> str:
-    """The :func:`estimate` table: fits, epochs and CPU hours per study, and the total."""
-    lines = [f"{'study':<28}{'fits':>6}{'epochs':>8}{'CPU h':>9}   ({sec_per_epoch:.2f} s/epoch)"]
-    lines += [f"{r['study']:<28}{r['fits']:>6}{r['epochs']:>8}{r['cpu_h']:>9.1f}" for r in rows]
-    lines.append(f"{'total':<28}{'':>14}{sum(r['cpu_h'] for r in rows):>9.1f}")
-    return "\n".join(lines)
+    return plan_estimate(cfg, quick, sweep, open_store(store, cfg, quick, False, log), log,
+                         sec_per_epoch, sec_per_update)

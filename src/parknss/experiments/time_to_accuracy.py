@@ -23,6 +23,7 @@ import math
 from dataclasses import asdict, dataclass
 
 from parknss.errors import DataError
+from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig, merge_overrides
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec
 
@@ -157,17 +158,24 @@ COLUMNS = [
 ]
 
 
-def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTAResult:
-    """Fit both recipes on every fold of the budget's ``tta_folds`` (CV split)."""
+def tta_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
+    """Paper and fast recipe fits of every fold of the budget's ``tta_folds``, in pairs
+    (the paper one is that fold's Table II NSS fit)."""
     b = cfg.budget(quick)
-    paper_ov = merge_overrides(b.overrides, {"train": {"epochs": b.convergence_epochs}})
+    paper_ov = b.deployment_overrides()
     jobs = []
     for i in b.tta_folds:
         jobs.append(fold_spec(sweep, "cv", i, paper_ov, name=f"paper recipe fold {i}"))
         jobs.append(
             fold_spec(sweep, "cv", i, merge_overrides(paper_ov, FAST), name=f"fast recipe fold {i}")
         )
-    res = sweep.run(jobs, "time to accuracy")
+    return jobs
+
+
+def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTAResult:
+    """Fit both recipes on every fold of the budget's ``tta_folds`` (CV split)."""
+    b = cfg.budget(quick)
+    res = sweep.run(tta_jobs(cfg, quick, sweep), "time to accuracy")
     folds = [
         FoldTTA(
             i,

@@ -1,0 +1,276 @@
+"""What each study fits, and what the fits the result store lacks will cost.
+
+Every study builds its fits with one function (``seed_jobs``, ``curve_jobs``,
+``ablation_jobs``, ``limiter_jobs``, ``convergence_jobs``, ``tta_jobs`` and Table II's
+``cv_jobs``); :func:`study_jobs` collects them per study, so the plan is the run's own
+job list, not a recount. A fit several studies share (the seed-noise fits and the floor,
+Fig. 4 and the fold-0 Table II and time-to-accuracy paper fits) is one entry of the
+store and is counted once in the total.
+
+Cost of a fit, CPU s (one torch thread): from its resolved NSS config and training
+trials,
+
+    paper recipe:  epochs x s_epoch(engine) x S / S_ref
+    fast recipe:   updates x s_update x s_epoch(engine) / s_epoch(fused Euler)
+                   + finish_epochs x s_epoch(engine) x S / S_ref
+
+with S the samples of one paper epoch (the training trials tiled into the fit's windows,
+padding included: ``sum ceil(n_i / L) x L``) and S_ref those of the fit the rates were
+timed on (CV fold 0); ``s_epoch(engine)`` per (integrator, engine) pair the plan holds
+(fused Euler, eager Euler, midpoint, RK4), timed by paper-size fits of 1 and n epochs
+after a warm-up (the difference removes loading and the first validation: process CPU
+time, since the wall clock of a shared machine measures the neighbours), and ``s_update``
+by fast fits of 1 and 1 + k phase-1 updates. Capacity variants are costed at their own
+size only through their timed class (a smaller net is counted at the deployed net's rate:
+an upper bound); the linear baseline is a least-squares fit of a few seconds and counted
+as free.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from parknss.executor import Job, Store
+from parknss.experiments.config import ExperimentsConfig
+from parknss.experiments.sweep import Sweep
+
+PLANNED: tuple[str, ...] = (
+    "table2",
+    "time_to_accuracy",
+    "convergence",
+    "seed-noise",
+    "learning-curve",
+    "limiter",
+    "ablations",
+)
+"""The studies :func:`study_jobs` knows, in report order (Table II first: it is the fit
+the others share most)."""
+
+FUSED: tuple[str, str] = ("euler", "fused")
+
+
+def study_jobs(name: str, cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
+    """The fit jobs of study ``name`` (one of :data:`PLANNED`) at the budget."""
+    if name == "table2":
+        from parknss.experiments.cv import MODEL_VARIANTS, cv_jobs
+
+        ov = cfg.budget(quick).deployment_overrides()
+        return [j for _, j in cv_jobs(sweep.data, None, ov, list(MODEL_VARIANTS))]
+    if name == "time_to_accuracy":
+        from parknss.experiments.time_to_accuracy import tta_jobs
+
+        return tta_jobs(cfg, quick, sweep)
+    if name == "convergence":
+        from parknss.experiments.convergence import convergence_jobs
+
+        return convergence_jobs(cfg, quick, sweep)
+    if name == "seed-noise":
+        from parknss.experiments.noise import seed_jobs
+
+        return seed_jobs(cfg, cfg.budget(quick), sweep)
+    if name == "learning-curve":
+        from parknss.experiments.learning_curve import curve_jobs
+
+        return [j for _, j in curve_jobs(cfg, quick, sweep)]
+    if name == "limiter":
+        from parknss.experiments.limiter_study import limiter_jobs
+
+        return limiter_jobs(cfg, quick, sweep)
+    if name == "ablations":
+        from parknss.experiments.ablations import ablation_jobs
+
+        return ablation_jobs(cfg, quick, sweep)
+    raise ValueError(f"no plan for study {name!r}; one of {', '.join(PLANNED)}")
+
+
+@dataclass(frozen=True)
+class FitShape:
+    """What a fit's cost depends on: model, recipe, engine class, step counts, samples
+    of one paper epoch (S in the module text)."""
+
+    model: str
+    recipe: str = "paper"
+    engine: tuple[str, str] = FUSED
+    epochs: int = 0
+    updates: int = 0
+    samples: int = 0
+
+
+def fit_shape(job: Job, campaign) -> FitShape:
+    """The :class:`FitShape` of a fold job (its config resolved, its fold's trials tiled)."""
+    from parknss.data.windows import tile, window_length
+    from parknss.experiments.folds import fold_config, make_fold
+
+    kw = job.kwargs
+    model = kw.get("model", "nss")
+    if model != "nss":
+        return FitShape(model)
+    cfg = fold_config(kw.get("config"), kw.get("overrides"))
+    fold = make_fold(campaign, kw.get("split", "cv"), kw.get("index", 0), kw.get("r", 1),
+                     kw.get("split_seed"))
+    lengths = [campaign[i].n for i in fold.train]
+    L = window_length(lengths, cfg.data.window)
+    samples = sum(len(tile(n, L)) * L for n in lengths)
+    integrator = cfg.model.integrator
+    engine = cfg.model.engine if cfg.model.engine != "auto" else (
+        "fused" if integrator == "euler" else "eager")
+    if cfg.train.recipe == "fast":
+        return FitShape(model, "fast", (integrator, engine), cfg.fast.finish_epochs,
+                        cfg.fast.updates, samples)
+    return FitShape(model, "paper", (integrator, engine), cfg.train.epochs, 0, samples)
+
+
+@dataclass
+class Rates:
+    """CPU s per paper epoch of each engine class (at ``ref_samples`` samples per epoch)
+    and per fast-recipe phase-1 update on the fused engine; ``timed``: measured here
+    (False: given on the command line)."""
+
+    epoch: dict[tuple[str, str], float]
+    update: float
+    ref_samples: int
+    timed: bool = True
+
+    def epoch_rate(self, engine: tuple[str, str]) -> float:
+        """s/epoch of an engine class; one not timed is counted at the fused rate."""
+        return self.epoch.get(engine, self.epoch[FUSED])
+
+    def cost(self, shape: FitShape) -> float:
+        """CPU s of a fit of this shape (module text)."""
+        if shape.model != "nss":
+            return 0.0
+        per_epoch = self.epoch_rate(shape.engine)
+        scale = shape.samples / self.ref_samples if self.ref_samples else 1.0
+        fast = shape.updates * self.update * per_epoch / self.epoch[FUSED]
+        return shape.epochs * per_epoch * scale + fast
+
+
+def time_rates(
+    data: str | None, overrides: dict, engines: set[tuple[str, str]], campaign,
+    log: Callable[[str], None], sec_per_epoch: float | None = None,
+    sec_per_update: float | None = None,
+) -> Rates:
+    """Time the rates the plan needs (module text) on CV fold 0 with the budget's
+    ``overrides``; a rate given is not timed (then every engine class costs it)."""
+    from parknss.experiments.config import merge_overrides
+    from parknss.experiments.folds import fold_job
+    from parknss.experiments.sweep import FOLD_JOB
+
+    def cpu_of(ov: dict) -> float:
+        cpu0 = time.process_time()
+        fold_job("cv", 0, data=data, overrides=merge_overrides(overrides, ov))
+        return time.process_time() - cpu0
+
+    ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
+    epoch: dict[tuple[str, str], float] = {}
+    if sec_per_epoch is not None:
+        epoch = {e: sec_per_epoch for e in {FUSED, *engines}}
+    else:
+        for integ, eng in sorted({FUSED, *engines}):
+            n = 6 if (integ, eng) == FUSED else 2
+            model = {"integrator": integ, "engine": eng}
+            log(f"timing paper-size fits of 1 and {n} epochs ({integ}, {eng}) ...")
+            paper = {"model": model, "train": {"recipe": "paper"}}
+            if not epoch:
+                cpu_of({**paper, "train": {"recipe": "paper", "epochs": 1}})  # warm-up
+            one = cpu_of({**paper, "train": {"recipe": "paper", "epochs": 1}})
+            many = cpu_of({**paper, "train": {"recipe": "paper", "epochs": n}})
+            epoch[(integ, eng)] = (many - one) / (n - 1)
+    if sec_per_update is None:
+        k = 20
+        log(f"timing fast-recipe fits of 1 and {1 + k} phase-1 updates ...")
+        fast = {"train": {"recipe": "fast"}}
+        one = cpu_of({**fast, "fast": {"updates": 1, "finish_epochs": 1}})
+        many = cpu_of({**fast, "fast": {"updates": 1 + k, "finish_epochs": 1}})
+        sec_per_update = (many - one) / k
+    timed = sec_per_epoch is None or sec_per_update is None
+    return Rates(epoch, sec_per_update, ref, timed)
+
+
+@dataclass
+class StudyCost:
+    """One study at the budget: its fits, those the store holds, the CPU hours of the
+    rest (one core per fit) and their recipes."""
+
+    study: str
+    fits: int
+    stored: int
+    cpu_h: float
+    recipes: dict[str, int] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {"study": self.study, "fits": self.fits, "stored": self.stored,
+                "cpu_h_left": self.cpu_h, "recipes": self.recipes}
+
+
+@dataclass
+class Estimate:
+    """The per-study costs, the rates and the distinct fits of the whole plan."""
+
+    studies: list[StudyCost]
+    total: StudyCost
+    rates: Rates
+
+    def to_json(self) -> dict:
+        return {
+            "sec_per_epoch": {"/".join(k): v for k, v in self.rates.epoch.items()},
+            "sec_per_update": self.rates.update,
+            "ref_samples": self.rates.ref_samples,
+            "studies": [s.to_json() for s in self.studies],
+            "total": self.total.to_json(),
+        }
+
+    def text(self) -> str:
+        """The table ``parknss study estimate`` prints."""
+        rates = ", ".join(f"{'/'.join(k)} {v:.2f}" for k, v in self.rates.epoch.items())
+        lines = [
+            f"CPU s per paper epoch: {rates}; per fast update: {self.rates.update:.3f}"
+            + ("" if self.rates.timed else " (given)"),
+            f"{'study':<20}{'fits':>6}{'stored':>8}{'CPU h left':>12}   recipes",
+        ]
+        for s in [*self.studies, self.total]:
+            mix = ", ".join(f"{k} {v}" for k, v in sorted(s.recipes.items()))
+            lines.append(f"{s.study:<20}{s.fits:>6}{s.stored:>8}{s.cpu_h:>12.1f}   {mix}")
+        return "\n".join(lines)
+
+
+def estimate(
+    cfg: ExperimentsConfig, quick: bool, sweep: Sweep, store: Store | None,
+    log: Callable[[str], None], sec_per_epoch: float | None = None,
+    sec_per_update: float | None = None, studies: tuple[str, ...] = PLANNED,
+) -> Estimate:
+    """Every study's fits at the budget, the store's share and the cost of the rest."""
+    campaign = sweep.campaign()
+    plans = {name: study_jobs(name, cfg, quick, sweep) for name in studies}
+    shapes: dict[str, FitShape] = {}
+    held: dict[str, bool] = {}
+    for jobs in plans.values():
+        for job in jobs:
+            key = _identity(job)
+            if key not in shapes:
+                shapes[key] = fit_shape(job, campaign)
+                held[key] = store is not None and store.get(job)[0]
+    engines = {s.engine for k, s in shapes.items() if s.model == "nss" and not held[k]}
+    rates = time_rates(sweep.data, cfg.budget(quick).overrides, engines, campaign, log,
+                       sec_per_epoch, sec_per_update)
+
+    def cost(name: str, keys: list[str]) -> StudyCost:
+        recipes: dict[str, int] = {}
+        for k in keys:
+            tag = shapes[k].recipe if shapes[k].model == "nss" else shapes[k].model
+            recipes[tag] = recipes.get(tag, 0) + 1
+        left = sum(rates.cost(shapes[k]) for k in keys if not held[k])
+        return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes)
+
+    per = [cost(n, list(dict.fromkeys(_identity(j) for j in plans[n]))) for n in studies]
+    return Estimate(per, cost("total (distinct)", list(shapes)), rates)
+
+
+def _identity(job: Job) -> str:
+    """The fit a job makes (:func:`~parknss.experiments.store.fit_key`): shared fits meet."""
+    from parknss.experiments.store import fit_key
+
+    return fit_key(job.fn, job.kwargs)
+

@@ -1,0 +1,125 @@
+"""The study plan and its cost: the jobs are the studies' own, shared fits meet, the
+cost model's arithmetic, and the store's share is not counted again."""
+
+from __future__ import annotations
+
+import pytest
+
+from helpers.experiments import tiny_setup
+from parknss.data.windows import make_windows
+from parknss.experiments.config import load_experiments_config
+from parknss.experiments.folds import make_fold
+from parknss.experiments.plan import (
+    FUSED,
+    FitShape,
+    Rates,
+    estimate,
+    fit_shape,
+    study_jobs,
+)
+from parknss.experiments.store import ResultStore, fit_key
+from parknss.experiments.sweep import Sweep, fold_spec
+from parknss.nss.campaigns import load_campaign
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    data, cfg_path = tiny_setup(tmp_path_factory.mktemp("plan"))
+    return str(data), load_experiments_config(cfg_path)
+
+
+def _ids(jobs):
+    return {fit_key(j.fn, j.kwargs) for j in jobs}
+
+
+def test_the_plan_is_the_studies_own_jobs_and_shared_fits_meet(tiny):
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    b = cfg.budget(False)
+    jobs = {n: study_jobs(n, cfg, False, sweep) for n in ("table2", "time_to_accuracy",
+                                                          "convergence", "seed-noise",
+                                                          "limiter", "learning-curve")}
+    assert len(jobs["seed-noise"]) == len(b.seeds)
+    assert len(jobs["limiter"]) == len(b.folds)
+    assert len(jobs["learning-curve"]) == len(cfg.learning_curve_rs) * len(b.folds)
+    assert len(jobs["time_to_accuracy"]) == 2 * len(b.tta_folds)
+    assert len(jobs["table2"]) == 12  # nss, direct yaw, linear x 4 folds
+    # Fig. 4's fit is the fold-0 Table II NSS fit and the fold-0 TTA paper fit
+    (conv,) = _ids(jobs["convergence"])
+    assert conv in _ids(jobs["table2"]) and conv in _ids(jobs["time_to_accuracy"])
+    with pytest.raises(ValueError, match="no plan"):
+        study_jobs("table9", cfg, False, sweep)
+
+
+def test_fit_shapes_follow_recipe_engine_window_and_training_set(tiny):
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    camp = load_campaign(data)
+    base = cfg.budget(False).study_overrides()
+    paper = fit_shape(fold_spec(sweep, "cv", 0, base), camp)
+    assert (paper.recipe, paper.engine, paper.epochs, paper.updates) == ("paper", FUSED, 2, 0)
+    fast = fit_shape(fold_spec(sweep, "cv", 0, {**base, "train": {"recipe": "fast"}}), camp)
+    assert (fast.recipe, fast.epochs, fast.updates) == ("fast", 2, 6)  # finish, updates
+    rk4 = fit_shape(fold_spec(sweep, "cv", 0, {**base, "model": {"integrator": "rk4"}}), camp)
+    assert rk4.engine == ("rk4", "eager")
+    fold = make_fold(camp, "cv", 0)
+    train = [camp[i] for i in fold.train]
+    longest = max(t.n for t in train)
+    for window, L in (("shortest", min(t.n for t in train)), (longest, longest)):
+        ov = {**base, "data": {"window": window}}
+        shape = fit_shape(fold_spec(sweep, "cv", 0, ov), camp)
+        assert shape.samples == make_windows(train, L).inputs.shape[0] * L  # what training tiles
+    fewer = fit_shape(fold_spec(sweep, "leave", 0, base, r=3), camp)
+    assert fewer.samples < paper.samples  # 4 training trials instead of 12
+    lin = fit_shape(study_jobs("table2", cfg, False, sweep)[-1], camp)
+    assert lin.model == "linear"
+
+
+def test_cost_arithmetic():
+    rates = Rates({FUSED: 2.0, ("rk4", "eager"): 10.0}, update=0.5, ref_samples=1000)
+    assert rates.cost(FitShape("nss", "paper", FUSED, 100, 0, 1000)) == pytest.approx(200.0)
+    assert rates.cost(FitShape("nss", "paper", FUSED, 100, 0, 500)) == pytest.approx(100.0)
+    # fast: updates at the update rate (scaled by the engine), finish epochs as paper ones
+    assert rates.cost(FitShape("nss", "fast", FUSED, 10, 40, 1000)) == pytest.approx(40.0)
+    assert rates.cost(FitShape("nss", "fast", ("rk4", "eager"), 10, 40, 1000)) == pytest.approx(
+        40 * 0.5 * 5 + 100.0)
+    assert rates.cost(FitShape("nss", "paper", ("midpoint", "eager"), 1, 0, 1000)) == 2.0
+    assert rates.cost(FitShape("linear")) == 0.0
+
+
+def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path):
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    studies = ("table2", "time_to_accuracy", "convergence")
+
+    def run():
+        return estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
+                        sec_per_update=0.1, studies=studies)
+
+    before = run()
+    (conv,) = study_jobs("convergence", cfg, False, sweep)
+    store.put(conv, {"stub": True}, wall_s=1.0, cpu_s=1.0)
+    after = run()
+    by = {s.study: s for s in after.studies}
+    assert [by[n].stored for n in studies] == [1, 1, 1]  # one fit, three studies
+    assert after.total.stored == 1 and after.total.fits == before.total.fits
+    shape = fit_shape(conv, load_campaign(data))
+    assert before.total.cpu_h - after.total.cpu_h == pytest.approx(
+        after.rates.cost(shape) / 3600.0)
+    assert by["convergence"].cpu_h == 0.0
+    assert after.total.recipes == {"paper": 8, "fast": 2, "linear": 4}
+
+
+def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
+    from parknss.experiments.plan import time_rates
+
+    data, cfg = tiny
+    said: list[str] = []
+    rates = time_rates(data, cfg.budget(False).overrides, {("rk4", "eager")},
+                       load_campaign(data), said.append)
+    assert set(rates.epoch) == {FUSED, ("rk4", "eager")} and rates.timed
+    assert all(v > 0 for v in rates.epoch.values()) and rates.update > 0
+    assert any("rk4" in m for m in said)
+    given = time_rates(data, {}, set(), load_campaign(data), said.append, 1.5, 0.2)
+    assert given.epoch == {FUSED: 1.5} and given.update == 0.2 and not given.timed
