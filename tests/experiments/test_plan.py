@@ -15,6 +15,7 @@ from parknss.experiments.plan import (
     Rates,
     estimate,
     fit_shape,
+    plan_rows,
     study_jobs,
 )
 from parknss.experiments.store import ResultStore, fit_key
@@ -47,6 +48,12 @@ def test_the_plan_is_the_studies_own_jobs_and_shared_fits_meet(tiny):
     # Fig. 4's fit is the fold-0 Table II NSS fit and the fold-0 TTA paper fit
     (conv,) = _ids(jobs["convergence"])
     assert conv in _ids(jobs["table2"]) and conv in _ids(jobs["time_to_accuracy"])
+    rows = plan_rows(cfg, False, sweep, ("ablations",))
+    assert list(rows) == [f"ablations: {a.name}" for a in cfg.axes]
+    base = _ids(rows["ablations: loss"]) & _ids(rows["ablations: yaw readout"])
+    assert len(base) == len(b.ablation_folds)  # the deployed baseline, in every axis's row
+    assert _ids(study_jobs("ablations", cfg, False, sweep)) == set().union(
+        *(_ids(j) for j in rows.values()))
     with pytest.raises(ValueError, match="no plan"):
         study_jobs("table9", cfg, False, sweep)
 

@@ -151,7 +151,7 @@ def test_fold_job_resumes_from_its_training_state(tiny, tmp_path, monkeypatch):
 
 
 def test_study_fits_take_the_budget_recipe_but_marked_axes_keep_theirs(tiny):
-    from parknss.experiments.ablations import _plan
+    from parknss.experiments.ablations import ablation_plan
     from parknss.experiments.noise import seed_jobs
 
     data, cfg = tiny
@@ -164,7 +164,7 @@ def test_study_fits_take_the_budget_recipe_but_marked_axes_keep_theirs(tiny):
         return job.kwargs["overrides"].get("train", {}).get("recipe", "paper")
 
     assert {recipe(j) for j in seed_jobs(fast_cfg, full, sweep)} == {"fast"}
-    plan = _plan(fast_cfg, False, sweep)
+    plan = ablation_plan(fast_cfg, False, sweep)
     by_axis = {}
     for axis, *_, job in plan:
         by_axis.setdefault(axis.name, set()).add(recipe(job))

@@ -152,7 +152,7 @@ def _base_lr(ov: Overrides) -> float:
     return float(ov.get("train", {}).get("lr", TrainConfig().lr))
 
 
-def _plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
+def ablation_plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
     """(axis, option, lr, fold, window, job) for every fit of the study."""
     budget = cfg.budget(quick)
     campaign = sweep.campaign()
@@ -184,7 +184,7 @@ def _plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
 def ablation_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
     """Every fit of the study, shared configurations once (the first spelling kept)."""
     jobs: dict[str, Job] = {}
-    for *_, job in _plan(cfg, quick, sweep):
+    for *_, job in ablation_plan(cfg, quick, sweep):
         jobs.setdefault(job.key(), job)
     return list(jobs.values())
 
@@ -219,7 +219,7 @@ def ablations(
 ) -> AblationResult:
     """Run every axis of ``cfg.axes`` (see the module doc)."""
     budget = cfg.budget(quick)
-    plan = _plan(cfg, quick, sweep)
+    plan = ablation_plan(cfg, quick, sweep)
     results = sweep.run([p[-1] for p in plan], "ablations")
     axes = []
     for axis in cfg.axes:

@@ -85,6 +85,23 @@ def study_jobs(name: str, cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> 
     raise ValueError(f"no plan for study {name!r}; one of {', '.join(PLANNED)}")
 
 
+def plan_rows(
+    cfg: ExperimentsConfig, quick: bool, sweep: Sweep, studies: tuple[str, ...] = PLANNED
+) -> dict[str, list[Job]]:
+    """The jobs of each study, Table III split into one row per axis (``ablations: loss``
+    ...; the deployed baseline is in every axis's row, as the axis compares against it)."""
+    rows: dict[str, list[Job]] = {}
+    for name in studies:
+        if name != "ablations":
+            rows[name] = study_jobs(name, cfg, quick, sweep)
+            continue
+        from parknss.experiments.ablations import ablation_plan
+
+        for axis, *_, job in ablation_plan(cfg, quick, sweep):
+            rows.setdefault(f"ablations: {axis.name}", []).append(job)
+    return rows
+
+
 @dataclass(frozen=True)
 class FitShape:
     """What a fit's cost depends on: model, recipe, engine class, step counts, samples
@@ -228,11 +245,11 @@ class Estimate:
         lines = [
             f"CPU s per paper epoch: {rates}; per fast update: {self.rates.update:.3f}"
             + ("" if self.rates.timed else " (given)"),
-            f"{'study':<20}{'fits':>6}{'stored':>8}{'CPU h left':>12}   recipes",
+            f"{'study':<28}{'fits':>6}{'stored':>8}{'CPU h left':>12}   recipes",
         ]
         for s in [*self.studies, self.total]:
             mix = ", ".join(f"{k} {v}" for k, v in sorted(s.recipes.items()))
-            lines.append(f"{s.study:<20}{s.fits:>6}{s.stored:>8}{s.cpu_h:>12.1f}   {mix}")
+            lines.append(f"{s.study:<28}{s.fits:>6}{s.stored:>8}{s.cpu_h:>12.1f}   {mix}")
         return "\n".join(lines)
 
 
@@ -243,7 +260,7 @@ def estimate(
 ) -> Estimate:
     """Every study's fits at the budget, the store's share and the cost of the rest."""
     campaign = sweep.campaign()
-    plans = {name: study_jobs(name, cfg, quick, sweep) for name in studies}
+    plans = plan_rows(cfg, quick, sweep, studies)
     shapes: dict[str, FitShape] = {}
     held: dict[str, bool] = {}
     for jobs in plans.values():
@@ -264,7 +281,7 @@ def estimate(
         left = sum(rates.cost(shapes[k]) for k in keys if not held[k])
         return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes)
 
-    per = [cost(n, list(dict.fromkeys(_identity(j) for j in plans[n]))) for n in studies]
+    per = [cost(n, list(dict.fromkeys(_identity(j) for j in jobs))) for n, jobs in plans.items()]
     return Estimate(per, cost("total (distinct)", list(shapes)), rates)
 
 
