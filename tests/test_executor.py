@@ -2,7 +2,7 @@ import json
 
 import pytest
 
-from parknss.errors import ConfigError
+from parknss.errors import ConfigError, MissingResultsError
 from parknss.executor import Job, ResultCache, Tally, run_jobs
 
 PROBE = "parknss.experiments.probe:probe_fit"
@@ -57,6 +57,8 @@ def test_ray_matches_local():
 
 def test_a_store_behind_the_cache(tmp_path):
     class DictStore:
+        fit_missing = True
+
         def __init__(self):
             self.docs, self.times = {}, {}
 
@@ -77,6 +79,12 @@ def test_a_store_behind_the_cache(tmp_path):
                      tally=tally)
     assert again == first and tally.to_json() == {"cache": 0, "store": 2, "computed": 2}
     assert not ResultCache(tmp_path / "b").get(jobs[0])[0]  # a stored result is not copied
+    store.fit_missing = False  # --stored-only: what the store lacks is an error, not a fit
+    assert run_jobs(jobs, workers=1, progress=False, store=store) == first
+    more = [*jobs, *_jobs(3)[2:]]
+    with pytest.raises(MissingResultsError, match="1 of 3 fits are not stored"):
+        run_jobs(more, workers=1, progress=False, store=store, desc="probe")
+    assert len(store.docs) == 2  # nothing was fitted
 
 
 def test_pool_stores_each_result_as_soon_as_it_finishes():
@@ -84,6 +92,8 @@ def test_pool_stores_each_result_as_soon_as_it_finishes():
     (a study killed mid-way keeps every fit that completed); results keep job order."""
 
     class Recorder:
+        fit_missing = True
+
         def __init__(self):
             self.order = []
 

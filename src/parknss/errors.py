@@ -24,6 +24,16 @@ class CheckpointError(ParknssError):
     """A model artefact is missing, corrupt or does not match the code that loads it."""
 
 
+class MissingResultsError(ParknssError):
+    """A run that may only read stored results (``parknss reproduce --stored-only``) needs
+    fits the run cache and the result store do not hold."""
+
+    def __init__(self, desc: str, missing: list[str], total: int) -> None:
+        self.desc, self.missing, self.total = desc, list(missing), total
+        super().__init__(f"{desc}: {len(self.missing)} of {total} fits are not stored "
+                         f"({', '.join(self.missing[:3])}{', ...' if len(missing) > 3 else ''})")
+
+
 class PlanningError(ParknssError):
     """A scene or planning request is malformed (not: no plan found, which is a result)."""
 

@@ -30,7 +30,7 @@ from typing import Any, Protocol
 
 from tqdm import tqdm
 
-from parknss.errors import ConfigError, ParknssError
+from parknss.errors import ConfigError, MissingResultsError, ParknssError
 
 EXECUTORS = ("local", "ray")
 
@@ -80,7 +80,11 @@ def execute_timed(job: Job, torch_threads: int = 1) -> tuple[Any, float, float]:
 
 class Store(Protocol):
     """A lookup behind the run cache: ``get`` is ``(hit, result)``; ``put`` records a
-    computed result with the wall and CPU seconds its worker spent on it."""
+    computed result with the wall and CPU seconds its worker spent on it;
+    ``fit_missing`` False makes a job the cache and the store lack an error, not a fit
+    (:class:`~parknss.errors.MissingResultsError`, raised before anything is fitted)."""
+
+    fit_missing: bool
 
     def get(self, job: Job) -> tuple[bool, Any]: ...
 
@@ -174,6 +178,8 @@ def run_jobs(
             count.store += 1
         else:
             todo.append(i)
+    if todo and store is not None and not store.fit_missing:
+        raise MissingResultsError(desc, [jobs[i].name or jobs[i].fn for i in todo], len(jobs))
     bar = tqdm(
         total=len(jobs),
         initial=len(jobs) - len(todo),

@@ -235,6 +235,14 @@ def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study
             "--store", str(tmp_path / "results"), "--json"]  # fmt: skip
     assert main(["reproduce", "table2", *base, "--out", str(tmp_path / "a")]) == 0
     capsys.readouterr()
+    stored = len(entries(tmp_path / "results"))
+    # --stored-only fits nothing: the fast fits are missing, so the artefact is not measured
+    assert main(["reproduce", "time_to_accuracy", *base, "--stored-only",
+                 "--out", str(tmp_path / "s")]) == 0  # fmt: skip
+    only = json.loads(capsys.readouterr().out)
+    assert list(only["verdicts"].values()) == ["not measured"]
+    assert len(entries(tmp_path / "results")) == stored
+    assert "2 of 4 fits" in (tmp_path / "s" / "report.html").read_text()
     assert main(["reproduce", "time_to_accuracy", *base, "--out", str(tmp_path / "b")]) == 0
     doc = json.loads(capsys.readouterr().out)
     # the paper recipe's fold fits are Table II's (same resolved config): read, not refitted
@@ -245,6 +253,14 @@ def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study
     assert len(fast) == 2 and all(e.result["recipe"] == "fast" for e in fast)
     hist = fast[0].result["history"]
     assert len(hist["cpu_s"]) == len(hist["raw"]) and fast[0].result["cpu_s"] > 0.0
+    assert main(["reproduce", "time_to_accuracy", *base, "--stored-only",
+                 "--out", str(tmp_path / "t")]) == 0  # fmt: skip
+    again = json.loads(capsys.readouterr().out)  # now the store holds it all
+    assert again["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 4, "fitted": 0}
+    assert "not measured" not in again["verdicts"].values()
+    off = [*base[:-3], "--store", "off", "--stored-only", "--out", str(tmp_path / "u")]
+    assert main(["reproduce", "time_to_accuracy", *off]) != 0
+    assert "--stored-only reads the result store" in capsys.readouterr().err
 
 
 def test_sweep_fold_jobs_keep_their_training_state(tmp_path):

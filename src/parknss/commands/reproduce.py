@@ -2,7 +2,8 @@
 (:func:`parknss.experiments.reproduce.reproduce`) into a run folder that the same
 artefacts and budget resume (cache) and that is refused, holding anything else, unless
 ``--overwrite``; fits are read from the result store (``--store DIR|off``) and only the
-missing ones are fitted (``--refit``: all)."""
+missing ones are fitted (``--refit``: all; ``--stored-only``: none, an artefact whose fits
+the store lacks is reported "not measured")."""
 
 from __future__ import annotations
 
@@ -34,6 +35,10 @@ def register(app: typer.Typer) -> None:
             None, "--store", help="Result store folder or 'off' (default: results/)."
         ),
         refit: bool = typer.Option(False, "--refit", help="Refit what the store holds."),
+        stored_only: bool = typer.Option(
+            False, "--stored-only", help="Fit nothing: build what the store holds, mark the "
+            "rest not measured."
+        ),
     ) -> None:
         """Reproduce the paper's tables and figures (on the synthetic campaign by default)."""
         from parknss.experiments.reproduce import ReproduceInputs, artefact_list
@@ -44,7 +49,8 @@ def register(app: typer.Typer) -> None:
             return
         inputs = ReproduceInputs(name=name, quick=quick, executor=executor, workers=workers,
                                  address=address, data=data, out=out, config=config,
-                                 overwrite=overwrite, store=store, refit=refit)
+                                 overwrite=overwrite, store=store, refit=refit,
+                                 stored_only=stored_only)
         summary = run(inputs, lambda msg: typer.echo(msg, err=True))
         if as_json:
             typer.echo(json.dumps(summary, indent=2))

@@ -15,7 +15,7 @@ from parknss.experiments.ablations import AblationResult
 from parknss.experiments.learning_curve import LearningCurveResult
 from parknss.experiments.limiter_study import LimiterResult
 from parknss.experiments.noise import SeedNoiseResult
-from parknss.experiments.results import Finding
+from parknss.experiments.results import NOT_MEASURED, Finding
 from parknss.experiments.sweep import relative_effect
 
 
@@ -39,7 +39,7 @@ def _lower_is(effects: list[float], floor, channel: str) -> bool | None:
 
 
 def _axis_missing(claim: str, name: str) -> Finding:
-    return Finding(claim, f"axis {name!r} is not in the ablation config", None, "not measured")
+    return Finding(claim, f"axis {name!r} is not in the ablation config", None, NOT_MEASURED)
 
 
 def ablation_findings(res: AblationResult) -> list[Finding]:
@@ -188,7 +188,7 @@ def cotuning_finding(rows: dict | None = None) -> Finding:
     degrades the chain, into one that beats it; measured on Table IV's rows."""
     claim = "Co-tuning reverses the brake verdict (§V-D)"
     if not rows or "signal_target" not in rows or "cotuned_target" not in rows:
-        return Finding(claim, "Table IV rows not available", None, "not measured")
+        return Finding(claim, "Table IV rows not available", None, NOT_MEASURED)
     sig, tuned = rows["signal_target"]["vx_full"], rows["cotuned_target"]["vx_full"]
     ref = rows.get("selected_assembly", {}).get("vx_full")
     measured = (

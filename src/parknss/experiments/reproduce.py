@@ -29,10 +29,11 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
+from parknss.errors import MissingResultsError
 from parknss.executor import Tally
 from parknss.experiments.folds import fold_config
 from parknss.experiments.registry import artefacts, get
-from parknss.experiments.results import RunContext
+from parknss.experiments.results import NOT_MEASURED, ArtefactResult, Finding, RunContext
 from parknss.experiments.store import open_store
 from parknss.nss.config import NSSConfig
 from parknss.outputs import git_revision, run_folder
@@ -58,6 +59,7 @@ class ReproduceInputs:
     config: Path | None = None
     overwrite: bool = False
     store: str | None = None
+    stored_only: bool = False
     refit: bool = False
 
 
@@ -68,6 +70,14 @@ def artefact_list() -> str:
 
 def _quiet(msg: str) -> None:
     pass
+
+
+def not_measured(title: str, exc: MissingResultsError) -> ArtefactResult:
+    """An artefact a ``--stored-only`` run cannot build: no tables, one finding row
+    "not measured" saying how many of its fits the store lacks."""
+    what = f"{len(exc.missing)} of {exc.total} fits of '{exc.desc}' are not in the store"
+    return ArtefactResult(notes=f"Not measured: {what}.",
+                          findings=[Finding(title, what, None, NOT_MEASURED)])
 
 
 def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> dict:
@@ -87,7 +97,8 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
         cache_dir=out / "cache",
         config=inputs.config,
     )
-    ctx.store = open_store(inputs.store, ctx.experiments_config(), quick, inputs.refit)
+    ctx.store = open_store(inputs.store, ctx.experiments_config(), quick, inputs.refit,
+                           stored_only=inputs.stored_only)
     identity = {
         "artefacts": [a.name for a in chosen],
         "quick": quick,
@@ -111,7 +122,11 @@ def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> d
         log(f"[reproduce] {art.name}: {art.title}")
         t0 = time.perf_counter()
         ctx.tally = Tally()
-        res = art.make(ctx)
+        try:
+            res = art.make(ctx)
+        except MissingResultsError as exc:  # --stored-only: say what is missing, fit nothing
+            res = not_measured(art.title, exc)
+            log(f"[reproduce] {art.name}: not measured ({exc})")
         res.wall_s = time.perf_counter() - t0
         t = ctx.tally
         sources[art.name] = {"run_cache": t.cache, "store": t.store, "fitted": t.computed}

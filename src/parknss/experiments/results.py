@@ -28,6 +28,7 @@ class Table:
 
 
 SMOKE_TEST = "smoke test"
+NOT_MEASURED = "not measured"
 
 
 @dataclass

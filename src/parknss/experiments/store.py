@@ -227,12 +227,14 @@ def _nss_config(kwargs: Mapping[str, Any]) -> dict | None:
 
 class ResultStore:
     """The store at ``root`` (see the module doc); ``read``/``write`` switch the lookup and
-    the recording off (``refit``, quick runs). Implements :class:`parknss.executor.Store`."""
+    the recording off (``refit``, quick runs); ``fit_missing`` False makes a fit it lacks
+    an error (``--stored-only``). Implements :class:`parknss.executor.Store`."""
 
     def __init__(self, root: str | Path, read: bool = True, write: bool = True,
-                 log: Callable[[str], None] = _warn) -> None:
+                 log: Callable[[str], None] = _warn, fit_missing: bool = True) -> None:
         self.root = Path(root)
         self.read, self.write, self.log = read, write, log
+        self.fit_missing = fit_missing
         self.code = code_version()
         self._data_hashes: dict[str | None, str] = {}
         self._revision: str | None = None
@@ -313,14 +315,20 @@ def store_dir(option: str | Path | None, setting: str = AUTO,
 
 
 def open_store(option: str | Path | None, cfg, quick: bool, refit: bool,
-               log: Callable[[str], None] = _warn) -> ResultStore | None:
+               log: Callable[[str], None] = _warn,
+               stored_only: bool = False) -> ResultStore | None:
     """The store of a study run (None when off): ``cfg`` is the
     :class:`~parknss.experiments.config.ExperimentsConfig` (``store`` section); ``refit``
-    skips its hits; a ``quick`` run does not write unless ``store.write_quick``."""
+    skips its hits; a ``quick`` run does not write unless ``store.write_quick``;
+    ``stored_only``: read, never fit (refused with ``refit`` or without a store)."""
     root = store_dir(option, cfg.store.dir)
+    if stored_only and (root is None or refit):
+        raise ConfigError("--stored-only reads the result store: it needs one (not --store "
+                          "off) and cannot --refit")
     if root is None:
         return None
-    return ResultStore(root, read=not refit, write=not quick or cfg.store.write_quick, log=log)
+    return ResultStore(root, read=not refit, write=not quick or cfg.store.write_quick, log=log,
+                       fit_missing=not stored_only)
 
 
 def entries(root: str | Path) -> list[tuple[Path, StoreEntry | str]]:
