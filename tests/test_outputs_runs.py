@@ -275,6 +275,11 @@ def _check_command(
     return again
 
 
+FIT = "parknss.nss.train.fit"
+"""What a study's resumed run must not call: the NSS fit (not the fold job, whose signature
+names the study fits' state folders, :func:`parknss.experiments.store.fit_key`)."""
+
+
 @pytest.fixture
 def tiny(tmp_path) -> tuple[Path, Path]:
     """(campaign folder, tiny experiments YAML)."""
@@ -307,7 +312,7 @@ def test_study(tiny, tmp_path, capsys, monkeypatch):
             "--config", str(cfg), "--out", str(out)]
     _check_command(capsys, monkeypatch, out, argv, [*argv, "--floor", "paper"],
                    held="chain.json", command="parknss study",
-                   cache_job="parknss.experiments.folds.fold_job")
+                   cache_job=FIT)
     assert (out / "seed-noise.json").is_file() and (out / "seed_noise.png").is_file()
 
 
@@ -346,7 +351,7 @@ def test_reproduce(tiny, tmp_path, capsys, monkeypatch):
                          ["reproduce", "campaign", *base], held="legacy",
                          command="parknss reproduce",
                          fail="parknss.experiments.reproduce.write_report",
-                         cache_job="parknss.experiments.folds.fold_job")
+                         cache_job=FIT)
     assert doc["artefacts"] == ["seed_noise"] and doc["report"] == str(out / "report.html")
 
 

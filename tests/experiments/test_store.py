@@ -17,6 +17,7 @@ from parknss.experiments.store import (
     CODE_FILES,
     ResultStore,
     code_files,
+    code_tokens,
     code_version,
     entries,
     fit_key,
@@ -53,9 +54,39 @@ def test_code_version_follows_the_listed_files_only(tmp_path):
     assert code_version(tmp_path) == code_version()
     (tmp_path / "nss" / "config.py").write_text("# defaults: in the key, resolved\n")
     assert code_version(tmp_path) == code_version()
-    with (tmp_path / "nss" / "losses.py").open("a") as f:
-        f.write("\n# an edit\n")
+    losses = tmp_path / "nss" / "losses.py"
+    text = losses.read_text()
+    losses.write_text(text.replace('"""', '"""Reworded. ', 1) + "\n\n# a comment\n")
+    assert code_version(tmp_path) == code_version()  # docstrings and comments are not code
+    losses.write_text(text + "\nEPS_UNUSED = 1e-9\n")
     assert code_version(tmp_path) != code_version()
+
+
+def test_code_tokens_keep_code_and_drop_what_does_not_run():
+    a = '''"""Module doc."""
+import math  # why
+
+
+def f(x):
+    """Doc of f in °/s,
+    two lines: σ."""  # after
+
+    return math.sqrt(x)  # root
+
+
+class C:
+    "one" "joined"
+    y = "not a docstring"
+'''
+    b = '''import math
+def f(x):
+    return math.sqrt(x)
+class C:
+    y = "not a docstring"
+'''
+    assert code_tokens(a) == code_tokens(b)
+    assert code_tokens(b) != code_tokens(b.replace("sqrt", "exp"))
+    assert code_tokens(b) != code_tokens(b.replace("not a docstring", "other"))
 
 
 def test_where_the_store_is(tmp_path):

@@ -6,7 +6,8 @@ things: the job (its function and the keyword arguments that decide its numbers,
 function's defaults filled in, see :func:`bound_kwargs` and :func:`key_kwargs`), the
 **data hash** of the campaign it reads (:meth:`parknss.data.trial.Campaign.data_hash`,
 once per campaign and store) and the **training code version** (:func:`code_version`:
-a hash of the files in :data:`CODE_FILES`, the code that decides a fit's numbers; the
+a hash of the code of the files in :data:`CODE_FILES`, less comments and docstrings, the
+code that decides a fit's numbers; the
 NSS config's values enter through the job, resolved). A changed campaign or an edited
 training file therefore misses, and the fit runs again.
 
@@ -58,7 +59,9 @@ CODE_FILES: tuple[str, ...] = (
     "experiments/folds.py",  # the fold job and the limiter job
 )
 """The training code: files (globs) under ``src/parknss/`` whose edits change a fit's
-numbers. Editing any of them changes :func:`code_version`, so every stored fit misses.
+numbers. Editing their code changes :func:`code_version`, so every stored fit misses;
+comments, docstrings and blank lines are not part of it (:func:`code_tokens`), so a
+corrected docstring keeps the store.
 Not listed: ``nss/config.py`` and ``configs/nss.yaml``, the NSS config's defaults: an NSS
 fit's key holds the config it resolves to (:func:`key_kwargs`), so a changed default
 misses exactly the fits it changes (tuning the fast recipe's defaults keeps the paper
@@ -77,12 +80,46 @@ def code_files(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES)
     return sorted(files - skip)
 
 
+def _chars(line: str, col_bytes: int) -> int:
+    """The character column of ``ast``'s UTF-8 byte column ``col_bytes`` in ``line``."""
+    return len(line.encode()[:col_bytes].decode(errors="ignore"))
+
+
+def code_tokens(source: str) -> bytes:
+    """``source`` with what does not run removed: comments, the docstrings of the module,
+    its classes and functions, trailing spaces and blank lines. The ranges come from
+    ``ast`` (docstrings) and ``tokenize`` (comments), whose positions are the same on
+    every Python version that parses the file, so the hash is shared across machines."""
+    import ast
+    import io
+    import tokenize
+
+    lines = source.splitlines()
+    cuts = []
+    for node in ast.walk(ast.parse(source)):
+        body = getattr(node, "body", None)
+        if (isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+                and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            d = body[0]
+            cuts.append(((d.lineno, _chars(lines[d.lineno - 1], d.col_offset)),
+                         (d.end_lineno, _chars(lines[d.end_lineno - 1], d.end_col_offset))))
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.COMMENT:
+            cuts.append((tok.start, tok.end))
+    for (r0, c0), (r1, c1) in sorted(cuts, reverse=True):  # rows 1-based, columns 0-based
+        lines[r0 - 1 : r1] = [lines[r0 - 1][:c0] + lines[r1 - 1][c1:]]
+    return "\n".join(ln.rstrip() for ln in lines if ln.strip()).encode()
+
+
 def code_version(root: Path = PACKAGE_DIR, patterns: tuple[str, ...] = CODE_FILES) -> str:
-    """Hash of the training code (the relative paths and bytes of :func:`code_files`)."""
+    """Hash of the training code: the relative paths of :func:`code_files` and their
+    :func:`code_tokens`."""
     h = hashlib.sha256()
     for p in code_files(root, patterns):
         h.update(p.relative_to(root).as_posix().encode() + b"\0")
-        h.update(p.read_bytes() + b"\0")
+        h.update(code_tokens(p.read_text(encoding="utf-8")) + b"\0")
     return h.hexdigest()[:16]
 
 
