@@ -119,8 +119,11 @@ class TTAResult:
                     f.fast.best,
                     f.fast_score.vx,
                     f.fast_score.yaw,
-                    f.reach_cpu_s,
-                    f.speedup_reach,
+                    *(
+                        (f.reach_cpu_s, f.speedup_reach)
+                        if f.reach_cpu_s is not None
+                        else (f"not reached (best {f.fast.best / f.target - 1:+.0%})", "-")
+                    ),
                     f.speedup_total,
                 ]
             )
