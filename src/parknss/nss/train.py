@@ -168,8 +168,10 @@ def fit(
 ) -> FitResult:
     """Train on ``train`` (best checkpoint on ``val``, or the training loss if empty).
 
-    ``out_dir`` receives the resumable state every ``checkpoint_every`` epochs;
-    ``resume=True`` continues from it. ``on_epoch(e)`` is called after each epoch.
+    The fit is the recipe's Adam steps (``train.recipe``, :mod:`parknss.nss.recipes`: a
+    paper step is one epoch, a fast phase-1 step one minibatch update). ``out_dir``
+    receives the resumable state every ``checkpoint_every`` steps; ``resume=True``
+    continues from it. ``on_epoch(k)`` is called after step k.
     """
     cfg = cfg or NSSConfig()
     train, val = list(train), list(val)
