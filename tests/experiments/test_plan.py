@@ -7,6 +7,7 @@ import pytest
 
 from helpers.experiments import tiny_setup
 from parknss.data.windows import make_windows
+from parknss.errors import ConfigError
 from parknss.experiments.config import load_experiments_config
 from parknss.experiments.folds import make_fold
 from parknss.experiments.plan import (
@@ -130,3 +131,5 @@ def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
     assert any("rk4" in m for m in said)
     given = time_rates(data, {}, set(), load_campaign(data), said.append, 1.5, 0.2)
     assert given.epoch == {FUSED: 1.5} and given.update == 0.2 and not given.timed
+    with pytest.raises(ConfigError, match="non-positive"):
+        time_rates(data, {}, set(), load_campaign(data), said.append, 0.0, 0.2)

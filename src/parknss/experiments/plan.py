@@ -20,10 +20,9 @@ timed on (CV fold 0); ``s_epoch(engine)`` per (integrator, engine) pair the plan
 (fused Euler, eager Euler, midpoint, RK4), timed by paper-size fits of 1 and n epochs
 after a warm-up (the difference removes loading and the first validation: process CPU
 time, since the wall clock of a shared machine measures the neighbours), and ``s_update``
-by fast fits of 1 and 1 + k phase-1 updates. Capacity variants are costed at their own
-size only through their timed class (a smaller net is counted at the deployed net's rate:
-an upper bound); the linear baseline is a least-squares fit of a few seconds and counted
-as free.
+by fast fits of 1 and 1 + k phase-1 updates. Capacity variants are costed at the
+deployed net's rate (an upper bound for the smaller nets); the linear baseline is a
+least-squares fit of a few seconds and counted as free.
 """
 
 from __future__ import annotations
@@ -32,6 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from parknss.errors import ConfigError
 from parknss.executor import Job, Store
 from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.sweep import Sweep
@@ -202,6 +202,11 @@ def time_rates(
         one = cpu_of({**fast, "fast": {"updates": 1, "finish_epochs": 1}})
         many = cpu_of({**fast, "fast": {"updates": 1 + k, "finish_epochs": 1}})
         sec_per_update = (many - one) / k
+    bad = {"/".join(k): v for k, v in epoch.items() if not v > 0.0}
+    if bad or not sec_per_update > 0.0:
+        raise ConfigError(f"timing gave non-positive rates ({bad or sec_per_update}): the "
+                          "machine's noise exceeds the timed steps; pass --sec-per-epoch "
+                          "and --sec-per-update")
     timed = sec_per_epoch is None or sec_per_update is None
     return Rates(epoch, sec_per_update, ref, timed)
 
