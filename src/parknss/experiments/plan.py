@@ -164,6 +164,12 @@ class Rates:
         return shape.epochs * per_epoch * scale + fast
 
 
+def paper_fit(integrator: str, engine: str, epochs: int) -> dict:
+    """The overrides of a paper-recipe timing fit on one engine class."""
+    return {"model": {"integrator": integrator, "engine": engine},
+            "train": {"recipe": "paper", "epochs": epochs}}
+
+
 def time_rates(
     data: str | None, overrides: dict, engines: set[tuple[str, str]], campaign,
     log: Callable[[str], None], sec_per_epoch: float | None = None,
@@ -187,14 +193,12 @@ def time_rates(
     else:
         for integ, eng in sorted({FUSED, *engines}):
             n = 6 if (integ, eng) == FUSED else 2
-            model = {"integrator": integ, "engine": eng}
             log(f"timing paper-size fits of 1 and {n} epochs ({integ}, {eng}) ...")
-            paper = {"model": model, "train": {"recipe": "paper"}}
+            one_epoch = paper_fit(integ, eng, 1)
             if not epoch:
-                cpu_of({**paper, "train": {"recipe": "paper", "epochs": 1}})  # warm-up
-            one = cpu_of({**paper, "train": {"recipe": "paper", "epochs": 1}})
-            many = cpu_of({**paper, "train": {"recipe": "paper", "epochs": n}})
-            epoch[(integ, eng)] = (many - one) / (n - 1)
+                cpu_of(one_epoch)  # warm-up: imports, scripting
+            one = cpu_of(one_epoch)
+            epoch[(integ, eng)] = (cpu_of(paper_fit(integ, eng, n)) - one) / (n - 1)
     if sec_per_update is None:
         k = 20
         log(f"timing fast-recipe fits of 1 and {1 + k} phase-1 updates ...")
@@ -265,12 +269,15 @@ def estimate(
 ) -> Estimate:
     """Every study's fits at the budget, the store's share and the cost of the rest."""
     campaign = sweep.campaign()
-    plans = plan_rows(cfg, quick, sweep, studies)
     shapes: dict[str, FitShape] = {}
     held: dict[str, bool] = {}
-    for jobs in plans.values():
+    rows: dict[str, list[str]] = {}  # the distinct fits of each row, by fit key
+    for name, jobs in plan_rows(cfg, quick, sweep, studies).items():
+        keys = rows[name] = []
         for job in jobs:
             key = _identity(job)
+            if key not in keys:
+                keys.append(key)
             if key not in shapes:
                 shapes[key] = fit_shape(job, campaign)
                 held[key] = store is not None and store.get(job)[0]
@@ -286,7 +293,7 @@ def estimate(
         left = sum(rates.cost(shapes[k]) for k in keys if not held[k])
         return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes)
 
-    per = [cost(n, list(dict.fromkeys(_identity(j) for j in jobs))) for n, jobs in plans.items()]
+    per = [cost(name, keys) for name, keys in rows.items()]
     return Estimate(per, cost("total (distinct)", list(shapes)), rates)
 
 
