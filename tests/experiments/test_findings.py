@@ -25,3 +25,52 @@ def test_lowered_but_phase_b_better_differs_and_says_so():
 def test_no_rows_is_not_measured():
     f = cotuning_finding(None)
     assert f.agrees is None and f.verdict == "not measured"
+
+
+def _ablations(axes: dict[str, list[tuple[str, float, float]]]):
+    """An ablation result of one fold per option: axis -> [(label, vx, yaw)], first deployed."""
+    from parknss.experiments.ablations import AblationResult, AxisResult, OptionResult
+    from parknss.experiments.noise import NoiseFloor
+    from parknss.experiments.sweep import FoldScore
+
+    def opt(axis, label, vx, yaw, deployed):
+        s = FoldScore(vx, vx, yaw, vx, yaw, 10.0, 3, 12, epochs=10)
+        return OptionResult(axis, label, deployed, [s])
+
+    result = [AxisResult(name, [opt(name, *o, i == 0) for i, o in enumerate(opts)], False)
+              for name, opts in axes.items()]
+    return AblationResult(result, NoiseFloor(vx=0.02, yaw=0.035, n_seeds=5, source="measured"),
+                          3000, [0])
+
+
+def _finding(res, start: str):
+    from parknss.experiments.findings import ablation_findings
+
+    return next(f for f in ablation_findings(res) if f.claim.startswith(start))
+
+
+def test_normalization_needs_the_tie_and_the_z_score_penalty():
+    # threshold 2 x 2 % = 4 %: plain +1 % ties, z-score +20 % is a penalty
+    norm = [("clipped min-max", 0.2, 0.7), ("plain min-max", 0.202, 0.7), ("z-score", 0.24, 0.6)]
+    assert _finding(_ablations({"normalization": norm}), "Clipped").verdict == "agrees"
+    norm[1] = ("plain min-max", 0.23, 0.7)  # +15 %: no tie
+    assert _finding(_ablations({"normalization": norm}), "Clipped").verdict == "differs"
+    norm[1], norm[2] = ("plain min-max", 0.2, 0.7), ("z-score", 0.205, 0.6)  # penalty in noise
+    assert _finding(_ablations({"normalization": norm}), "Clipped").verdict == "within noise"
+
+
+def test_schedule_claims_a_vx_gain_and_a_yaw_tie():
+    sched = [("cosine", 0.19, 0.70), ("constant", 0.21, 0.71)]  # vx +10.5 %, yaw +1.4 %
+    assert _finding(_ablations({"lr schedule": sched}), "Cosine").verdict == "agrees"
+    sched[1] = ("constant", 0.17, 0.71)  # constant better beyond the floor
+    assert _finding(_ablations({"lr schedule": sched}), "Cosine").verdict == "differs"
+    sched[1] = ("constant", 0.192, 0.71)  # the vx gain inside the floor
+    assert _finding(_ablations({"lr schedule": sched}), "Cosine").verdict == "within noise"
+
+
+def test_capacity_agrees_only_when_every_smaller_net_is_worse():
+    cap = [("6x128", 0.1, 0.5), ("4x128", 0.12, 0.5), ("6x64", 0.13, 0.5)]
+    assert _finding(_ablations({"capacity": cap}), "The deployed six").verdict == "agrees"
+    cap[2] = ("6x64", 0.101, 0.5)
+    assert _finding(_ablations({"capacity": cap}), "The deployed six").verdict == "within noise"
+    assert _finding(_ablations({}), "The deployed six").verdict == "not measured"

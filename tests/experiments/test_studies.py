@@ -176,3 +176,37 @@ def test_study_fits_take_the_budget_recipe_but_marked_axes_keep_theirs(tiny):
     assert shipped.full.recipe == "paper"
     marked = {a.name for a in shipped.axes if a.recipe == "paper"}
     assert marked == {"loss", "lr schedule", "training window"}
+
+
+def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tmp_path):
+    """Table III run axis by axis across sittings: a --stored-only run builds the axes
+    whose fits the store holds and says how many fits each other axis lacks."""
+    from parknss.errors import MissingResultsError
+    from parknss.experiments.findings import ablation_findings
+    from parknss.experiments.store import ResultStore
+    from parknss.experiments.study_tables import ablation_tables
+
+    data, cfg = tiny
+    floor = NoiseFloor(0.02, 0.035, 5, "measured")
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    yaw_only = cfg.model_copy(update={"axes": [a for a in cfg.axes if a.name == "yaw readout"]})
+    fitted = ablations(yaw_only, False, _sweep(data, store=store), floor)
+    store.fit_missing = False
+    res = ablations(cfg, False, _sweep(data, store=store), floor)
+    assert [a.name for a in res.axes] == ["yaw readout"]
+    assert res.axis("yaw readout").effect("direct", "vx") == fitted.axis("yaw readout").effect(
+        "direct", "vx")
+    # loss: MAE and MSE at 2 LRs, the MAE at the default LR is the stored baseline;
+    # window: the baseline and the longest window
+    gaps = {u.name: (u.missing, u.total) for u in res.unmeasured}
+    assert gaps == {"loss": (3, 4), "training window": (1, 2)}
+    rows = ablation_tables(res)[0].rows
+    assert ["loss", "not measured: 3 of 4 fits are not stored"] == rows[-2][:2]
+    found = {f.claim: f for f in ablation_findings(res)}
+    loss = next(f for c, f in found.items() if c.startswith("MAE"))
+    assert loss.verdict == "not measured" and "3 of 4 fits are not stored" in loss.measured
+    assert next(f for c, f in found.items() if c.startswith("The residual")).verdict != (
+        "not measured")
+    with pytest.raises(MissingResultsError, match=r"6 of 6 fits .* \(loss/MAE LR 0.001 f0, "):
+        ablations(cfg, False, _sweep(data, store=ResultStore(
+            tmp_path / "other", log=lambda msg: None, fit_missing=False)), floor)

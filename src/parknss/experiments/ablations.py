@@ -9,6 +9,12 @@ budget and report it at its best LR (by ``loss_lr_metric``, the held-out fold me
 axes marked ``cost`` (the integrator) also report the wall-clock ratio to the deployed
 option. Identical option configurations across axes are one cached job.
 
+A run that may only read stored results (``parknss reproduce --stored-only``) builds the
+axes whose fits the store holds and lists the others as :class:`UnmeasuredAxis` (how many
+of their fits are missing), so a study run axis by axis across sittings reports what it
+has; with no axis measured the study is not measured at all
+(:class:`~parknss.errors.MissingResultsError`).
+
 Window rules resolve per fold from its training-trial lengths n_i: ``shortest`` =
 min n_i, ``longest`` = max n_i (every trial one padded sequence), ``padding:F`` = the
 smallest L whose tiling (:func:`parknss.data.windows.tile`) pads at least a fraction F of
@@ -18,8 +24,9 @@ the sequence samples.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
+from parknss.errors import MissingResultsError
 from parknss.executor import Job
 from parknss.experiments.config import (
     AblationAxis,
@@ -106,20 +113,38 @@ class AxisResult:
 
 
 @dataclass
+class UnmeasuredAxis:
+    """An axis a stored-only run could not build: ``missing`` of its ``total`` fits are
+    not in the result store."""
+
+    name: str
+    missing: int
+    total: int
+
+    def describe(self) -> str:
+        return f"not measured: {self.missing} of {self.total} fits are not stored"
+
+
+@dataclass
 class AblationResult:
     axes: list[AxisResult]
     floor: NoiseFloor
     epochs: int
     folds: list[int]
+    unmeasured: list[UnmeasuredAxis] = field(default_factory=list)
 
     def axis(self, name: str) -> AxisResult | None:
         return next((a for a in self.axes if a.name == name), None)
+
+    def unmeasured_axis(self, name: str) -> UnmeasuredAxis | None:
+        return next((a for a in self.unmeasured if a.name == name), None)
 
     def to_json(self) -> dict:
         return {
             "epochs": self.epochs,
             "folds": self.folds,
             "floor": self.floor.to_json(),
+            "unmeasured": [asdict(u) for u in self.unmeasured],
             "axes": [
                 {
                     "name": a.name,
@@ -176,7 +201,8 @@ def ablation_plan(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
                             ov = merge_overrides(ov, {"data": {"window": win}})
                     if lr is not None and lr != _base_lr(ov):
                         ov = merge_overrides(ov, {"train": {"lr": lr}})
-                    job = fold_spec(sweep, "cv", k, ov, name=f"{axis.name}/{opt.label} f{k}")
+                    at = "" if lr is None else f" LR {lr:g}"
+                    job = fold_spec(sweep, "cv", k, ov, name=f"{axis.name}/{opt.label}{at} f{k}")
                     plan.append((axis, opt, lr, k, win, job))
     return plan
 
@@ -220,9 +246,15 @@ def ablations(
     """Run every axis of ``cfg.axes`` (see the module doc)."""
     budget = cfg.budget(quick)
     plan = ablation_plan(cfg, quick, sweep)
-    results = sweep.run([p[-1] for p in plan], "ablations")
+    stored_only = sweep.store is not None and not sweep.store.fit_missing
+    if stored_only:
+        results, unmeasured = _stored_axes(cfg, plan, sweep)
+    else:  # one sweep over every fit: the pool keeps all workers busy across axes
+        results, unmeasured = sweep.run([p[-1] for p in plan], "ablations"), []
     axes = []
     for axis in cfg.axes:
+        if any(u.name == axis.name for u in unmeasured):
+            continue
         opts = []
         for opt in axis.options:
             rows = [
@@ -232,4 +264,24 @@ def ablations(
             ]
             opts.append(_option(axis, opt, rows, cfg.loss_lr_metric))
         axes.append(AxisResult(axis.name, opts, axis.cost))
-    return AblationResult(axes, floor, budget.epochs, list(budget.ablation_folds))
+    return AblationResult(axes, floor, budget.epochs, list(budget.ablation_folds), unmeasured)
+
+
+def _stored_axes(cfg: ExperimentsConfig, plan, sweep: Sweep):
+    """Results of ``plan`` (None for the fits of an axis the store cannot build) and those
+    axes; raises when it can build none."""
+    probe = replace(sweep, tally=None, progress=False)  # the run's tally counts each fit once
+    unmeasured: list[UnmeasuredAxis] = []
+    for axis in cfg.axes:
+        try:
+            probe.run([p[-1] for p in plan if p[0] is axis], f"ablations: {axis.name}")
+        except MissingResultsError as exc:
+            unmeasured.append(UnmeasuredAxis(axis.name, len(exc.missing), exc.total))
+    skip = {u.name for u in unmeasured}
+    idx = [i for i, p in enumerate(plan) if p[0].name not in skip]
+    # with no axis measured, this raises what the whole study lacks
+    got = sweep.run([plan[i][-1] for i in idx] if idx else [p[-1] for p in plan], "ablations")
+    results: list = [None] * len(plan)
+    for i, r in zip(idx, got, strict=True):
+        results[i] = r
+    return results, unmeasured

@@ -38,18 +38,28 @@ def _lower_is(effects: list[float], floor, channel: str) -> bool | None:
     return None
 
 
-def _axis_missing(claim: str, name: str) -> Finding:
-    return Finding(claim, f"axis {name!r} is not in the ablation config", None, NOT_MEASURED)
+def _axis_missing(claim: str, name: str, res: AblationResult | None = None) -> Finding:
+    """Not measured: the axis is unmeasured in ``res`` (its fits are not stored) or is not
+    in the ablation config."""
+    gap = res.unmeasured_axis(name) if res is not None else None
+    why = gap.describe() if gap else f"axis {name!r} is not in the ablation config"
+    return Finding(claim, why, None, NOT_MEASURED)
+
+
+def _option(ax, word: str):
+    """The first option of an axis whose label holds ``word`` (case-insensitive)."""
+    return next((o for o in ax.options if word in o.label.lower()), None)
 
 
 def ablation_findings(res: AblationResult) -> list[Finding]:
-    """Residual readout, MAE, shortest windows, Euler vs RK4."""
-    out = []
+    """Normalization, residual readout, MAE, cosine schedule, shortest windows, Euler vs
+    RK4, capacity."""
+    out = [_normalization_finding(res)]
     fl = res.floor
     claim = "The residual yaw readout lowers the moving-region vx error (paper: -27 %)"
     ax = res.axis("yaw readout")
     if ax is None:
-        out.append(_axis_missing(claim, "yaw readout"))
+        out.append(_axis_missing(claim, "yaw readout", res))
     else:
         other = [o.label for o in ax.options if not o.deployed]
         eff = [ax.effect(lbl, "vx") for lbl in other]
@@ -65,7 +75,7 @@ def ablation_findings(res: AblationResult) -> list[Finding]:
     claim = "MAE beats MSE and log-cosh, each at its best LR (vx 0.163 vs 0.173 / 0.248)"
     ax = res.axis("loss")
     if ax is None:
-        out.append(_axis_missing(claim, "loss"))
+        out.append(_axis_missing(claim, "loss", res))
     else:
         other = [o for o in ax.options if not o.deployed]
         eff = [ax.effect(o.label, "vx") for o in other]
@@ -73,17 +83,60 @@ def ablation_findings(res: AblationResult) -> list[Finding]:
         out.append(
             Finding(claim, f"vx vs MAE{_lr(ax.baseline().lr)}: {text}", _lower_is(eff, fl, "vx"))
         )
+    out.append(_schedule_finding(res))
     claim = "The shortest training windows generalize best (vx 0.079 vs 0.103 / 0.092)"
     ax = res.axis("training window")
     if ax is None:
-        out.append(_axis_missing(claim, "training window"))
+        out.append(_axis_missing(claim, "training window", res))
     else:
         other = [o for o in ax.options if not o.deployed]
         eff = [ax.effect(o.label, "vx") for o in other]
         text = ", ".join(f"{o.label} {_pct(e)}" for o, e in zip(other, eff, strict=True))
         out.append(Finding(claim, f"vx vs shortest: {text}", _lower_is(eff, fl, "vx")))
     out.append(_integrator_finding(res))
+    out.append(_capacity_finding(res))
     return out
+
+
+def _normalization_finding(res: AblationResult) -> Finding:
+    claim = ("Clipped min-max ties plain min-max on vx; z-score pays a vx penalty "
+             "(vx 0.202 / 0.201 / 0.243)")
+    ax = res.axis("normalization")
+    plain = _option(ax, "plain") if ax else None
+    z = _option(ax, "z-score") if ax else None
+    if ax is None or plain is None or z is None:
+        return _axis_missing(claim, "normalization (with plain min-max and z-score)", res)
+    fl = res.floor
+    e_plain, e_z = ax.effect(plain.label, "vx"), ax.effect(z.label, "vx")
+    tie, penalty = fl.confirms_null(e_plain, "vx"), _lower_is([e_z], fl, "vx")
+    return Finding(claim, f"vx vs clipped: plain {_pct(e_plain)}, z-score {_pct(e_z)}; "
+                   f"{fl.describe()}", _null_verdict([tie, penalty]), _why_mixed(fl, penalty))
+
+
+def _schedule_finding(res: AblationResult) -> Finding:
+    claim = ("Cosine favours vx over the constant schedule (0.196 vs 0.202), its ω_z within "
+             "the seed-noise floor")
+    ax = res.axis("lr schedule")
+    const = _option(ax, "constant") if ax else None
+    if ax is None or const is None:
+        return _axis_missing(claim, "lr schedule (with a constant option)", res)
+    fl = res.floor
+    e_vx, e_yaw = ax.effect(const.label, "vx"), ax.effect(const.label, "yaw")
+    favours, tie = _lower_is([e_vx], fl, "vx"), fl.confirms_null(e_yaw, "yaw")
+    return Finding(claim, f"constant vs cosine: vx {_pct(e_vx)}, yaw {_pct(e_yaw)}; "
+                   f"{fl.describe()}", _null_verdict([favours, tie]), _why_mixed(fl, favours))
+
+
+def _capacity_finding(res: AblationResult) -> Finding:
+    claim = "The deployed six-layer state net outperforms the smaller variants"
+    ax = res.axis("capacity")
+    if ax is None:
+        return _axis_missing(claim, "capacity", res)
+    other = [o for o in ax.options if not o.deployed]
+    eff = [ax.effect(o.label, "vx") for o in other]
+    text = ", ".join(f"{o.label} {_pct(e)}" for o, e in zip(other, eff, strict=True))
+    return Finding(claim, f"vx vs {ax.baseline().label}: {text}; {res.floor.describe()}",
+                   _lower_is(eff, res.floor, "vx"))
 
 
 def _integrator_finding(res: AblationResult) -> Finding:
@@ -92,7 +145,7 @@ def _integrator_finding(res: AblationResult) -> Finding:
     labels = [o.label for o in ax.options] if ax else []
     rk4 = next((lbl for lbl in labels if "rk4" in lbl.lower()), None)
     if ax is None or rk4 is None:
-        return _axis_missing(claim, "integrator (with an RK4 option)")
+        return _axis_missing(claim, "integrator (with an RK4 option)", res)
     eager = next((lbl for lbl in labels if "eager" in lbl.lower()), None)
     fl = res.floor
     # accuracy against the eager Euler when there is one: the same engine and budget
@@ -125,6 +178,12 @@ def _null_verdict(confirms: list[bool | None], also: bool = True) -> bool | None
 
 def _why(floor) -> str:
     return f"floor too wide (> {100 * floor.max_threshold:.0f} %)"
+
+
+def _why_mixed(floor, difference: bool | None) -> str:
+    """Why a claim of one difference and one tie is undecided: the difference is within
+    the noise, else the floor is too wide to confirm the tie."""
+    return "within noise" if difference is None else _why(floor)
 
 
 def limiter_findings(res: LimiterResult) -> list[Finding]:

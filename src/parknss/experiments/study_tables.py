@@ -114,6 +114,8 @@ def ablation_tables(res: AblationResult) -> list[Table]:
             )
             for lr, v in sorted(o.lr_sweep.items()):
                 sweeps.append([ax.name, o.label, lr, _r(v)])
+    for u in res.unmeasured:  # a --stored-only run: the axes the store cannot build yet
+        rows.append([u.name, u.describe(), *[""] * 9])
     tables = [
         Table(
             f"Table III: design ablations on held-out maneuvers ({res.epochs} epochs, CV folds "
