@@ -1,15 +1,15 @@
-"""The co-tuning finding reads Table IV's rows: agrees only when co-tuning lowers the
-signal-fitted brake's chain error and the result is at least as good as Phase B."""
+"""The co-tuning finding reads a chain build: agrees only when the signal-fitted brake
+degrades the chain against the Phase B assembly and the co-tuned one beats it."""
 
 from parknss.experiments.findings import cotuning_finding
 
 
-def _rows(sig: float, tuned: float, ref: float) -> dict:
-    return {
+def _rows(sig: float, tuned: float, ref: float, **doc) -> dict:
+    return {"rows": {
         "signal_target": {"vx_full": sig},
         "cotuned_target": {"vx_full": tuned},
         "selected_assembly": {"vx_full": ref},
-    }
+    }, **doc}
 
 
 def test_reversal_agrees_when_cotuned_beats_both():
@@ -20,6 +20,16 @@ def test_reversal_agrees_when_cotuned_beats_both():
 def test_lowered_but_phase_b_better_differs_and_says_so():
     f = cotuning_finding(_rows(0.20, 0.065, 0.030))
     assert f.agrees is False and "Phase B assembly stays better" in f.measured
+
+
+def test_no_verdict_to_reverse_when_the_target_is_phase_bs_own_winner():
+    target = "brake/narx1s/cmd"
+    f = cotuning_finding(_rows(0.11, 0.11, 0.11, selection={"brake": target},
+                               cotune={"channel": "brake", "target": target, "best_step": 0}))
+    assert f.verdict == "differs"
+    assert "Phase B's own brake winner" in f.measured and "kept its starting" in f.measured
+    # co-tuning lowering a target that never degraded the chain reverses nothing either
+    assert cotuning_finding(_rows(0.059, 0.050, 0.059)).verdict == "differs"
 
 
 def test_no_rows_is_not_measured():

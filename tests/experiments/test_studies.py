@@ -201,7 +201,7 @@ def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tm
     gaps = {u.name: (u.missing, u.total) for u in res.unmeasured}
     assert gaps == {"loss": (3, 4), "training window": (1, 2)}
     rows = ablation_tables(res)[0].rows
-    assert ["loss", "not measured: 3 of 4 fits are not stored"] == rows[-2][:2]
+    assert rows[-2][:2] == ["loss", "not measured: 3 of 4 fits are not stored"]
     found = {f.claim: f for f in ablation_findings(res)}
     loss = next(f for c, f in found.items() if c.startswith("MAE"))
     assert loss.verdict == "not measured" and "3 of 4 fits are not stored" in loss.measured

@@ -7,7 +7,8 @@ commands, the ladder rows that need no retraining: all channels measured; the as
 with the signal-fitted target; with the co-tuned target; static affine actuator maps
 without dynamics (plus the selected assembly itself). The deployed chain carries the
 co-tuned target when that lowers the criterion (full + moving vx MSE) of the selected
-assembly, else the selected assembly. These are in-sample figures (the paper's Table IV
+assembly (strictly: co-tuning that kept its starting weights does not), else the
+selected assembly. These are in-sample figures (the paper's Table IV
 is on the deployment model too); the study reports the held-out counterparts.
 
 :func:`monolithic_score` is the "monolithic NSS on commands" row: the NSS architecture fed
@@ -134,12 +135,13 @@ def build_deployment(
     static = {ch: _fit_label(f"{ch}/static/cmd", nss, trials, cfg, env, progress)
               for ch in CHANNELS}
     rows["static_affine"] = chain_score(make_chain(nss, static, env), trials)
-    use_tuned = rows["cotuned_target"].criterion <= rows["selected_assembly"].criterion
+    # strictly lower: co-tuning that kept its start weights deploys the selected assembly
+    use_tuned = rows["cotuned_target"].criterion < rows["selected_assembly"].criterion
     chain = tuned_chain if use_tuned else selected
     deployed = {ch: (target.name + "+cotuned" if use_tuned and ch == target.channel
                      else winners[ch]) for ch in CHANNELS}
-    return Deployment(chain, env, rows, dict(winners), deployed, rep.to_json(),
-                      time.perf_counter() - t0)
+    return Deployment(chain, env, rows, dict(winners), deployed,
+                      {**rep.to_json(), "target": target.name}, time.perf_counter() - t0)
 
 
 def command_trial(tr: Trial) -> Trial:

@@ -306,6 +306,16 @@ def table5_artefact(ctx: RunContext) -> ArtefactResult:
     return ArtefactResult([table], figs, notes="; ".join(notes))
 
 
+def _cotune_note(co: dict) -> str:
+    """The co-tuning run in a few words: steps, best step, loss over all windows."""
+    full = co.get("full_loss") or []
+    if not full:
+        return "not recorded"
+    best = min(full, key=lambda p: p[1])
+    return (f"{co.get('iters')} steps on the {co.get('channel')} channel, full-window loss "
+            f"{full[0][1]:.4g} at step 0, best {best[1]:.4g} at step {co.get('best_step')}")
+
+
 @register("table4", "Table IV: the assembled-chain fidelity ladder", "§V-D, Table IV")
 def table4_artefact(ctx: RunContext) -> ArtefactResult:
     """Table IV. Full budget: ``parknss actuators ladder`` on the shipped NSS (Phase A/B,
@@ -345,6 +355,7 @@ def table4_artefact(ctx: RunContext) -> ArtefactResult:
     )
     return ArtefactResult(
         [table],
-        findings=[cotuning_finding(doc["rows"])],
-        notes=f"{source}; deployed: {doc.get('deployed')}",
+        findings=[cotuning_finding(doc)],
+        notes=f"{source}; Phase B winners: {doc.get('selection')}; deployed: "
+              f"{doc.get('deployed')}; co-tuning: {_cotune_note(doc.get('cotune') or {})}",
     )

@@ -242,10 +242,13 @@ def seed_noise_findings(res: SeedNoiseResult) -> list[Finding]:
     ]
 
 
-def cotuning_finding(rows: dict | None = None) -> Finding:
-    """§V-D: consequence-level co-tuning turns the signal-fitted 1 s NARX brake, which
-    degrades the chain, into one that beats it; measured on Table IV's rows."""
+def cotuning_finding(doc: dict | None = None) -> Finding:
+    """§V-D: the signal-fitted 1 s NARX brake degrades the chain against the Phase B
+    assembly, and consequence-level co-tuning turns it into one that beats that assembly;
+    measured on the rows of a chain build (``doc``: its ``rows``, and where recorded the
+    Phase B ``selection`` and the ``cotune`` report with its ``target`` and ``best_step``)."""
     claim = "Co-tuning reverses the brake verdict (§V-D)"
+    rows = (doc or {}).get("rows")
     if not rows or "signal_target" not in rows or "cotuned_target" not in rows:
         return Finding(claim, "Table IV rows not available", None, NOT_MEASURED)
     sig, tuned = rows["signal_target"]["vx_full"], rows["cotuned_target"]["vx_full"]
@@ -253,9 +256,17 @@ def cotuning_finding(rows: dict | None = None) -> Finding:
     measured = (
         f"1 s NARX brake in the chain: vx full {sig:.4f} signal-fitted -> {tuned:.4f} co-tuned"
     )
-    if ref is not None:
-        measured += f" (Phase B assembly {ref:.4f})"
-    beats_ref = ref is None or tuned <= ref
-    if tuned < sig and not beats_ref:
-        measured += "; lowered, but the Phase B assembly stays better"
-    return Finding(claim, measured, tuned < sig and beats_ref)
+    if ref is None:  # no Phase B assembly to reverse a verdict against
+        return Finding(claim, measured, tuned < sig)
+    measured += f" (Phase B assembly {ref:.4f})"
+    co = doc.get("cotune") or {}
+    target, channel = co.get("target"), co.get("channel")
+    if target is not None and (doc.get("selection") or {}).get(channel) == target:
+        measured += f"; {target} is Phase B's own {channel} winner here: no verdict to reverse"
+    elif sig <= ref:
+        measured += "; the signal-fitted target does not degrade the chain here"
+    elif tuned >= ref:
+        measured += "; lowered, but the Phase B assembly stays better" if tuned < sig else ""
+    if co.get("best_step") == 0:
+        measured += "; co-tuning kept its starting weights (no step lowered its loss)"
+    return Finding(claim, measured, sig > ref and tuned < ref)
