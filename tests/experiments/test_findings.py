@@ -84,3 +84,26 @@ def test_capacity_agrees_only_when_every_smaller_net_is_worse():
     cap[2] = ("6x64", 0.101, 0.5)
     assert _finding(_ablations({"capacity": cap}), "The deployed six").verdict == "within noise"
     assert _finding(_ablations({}), "The deployed six").verdict == "not measured"
+
+
+def _curve(means: list[float]):
+    from parknss.experiments.learning_curve import CurvePoint, LearningCurveResult, fit_power_law
+    from parknss.experiments.sweep import FoldScore
+
+    sizes = [4, 8, 12]
+    points = [CurvePoint(r, n, [0], [FoldScore(m, m, 1.0, m, 1.0, 1.0, 3, n, 10)])
+              for r, n, m in zip((3, 2, 1), sizes, means, strict=True)]
+    return LearningCurveResult(points, {"vx": fit_power_law(sizes, means)}, 16, 3000)
+
+
+def test_the_learning_curve_descends_only_beyond_the_floor():
+    from parknss.experiments.findings import learning_curve_findings
+    from parknss.experiments.noise import NoiseFloor
+
+    fl = NoiseFloor(vx=0.02, yaw=0.035, n_seeds=5, source="measured")  # threshold 4 %
+    (f,) = learning_curve_findings(_curve([0.30, 0.20, 0.15]), fl)
+    assert f.verdict == "agrees" and "8->12 -25.0 %" in f.measured and "seed-noise" in f.measured
+    (f,) = learning_curve_findings(_curve([0.30, 0.20, 0.198]), fl)  # last step -1 %: flat
+    assert f.verdict == "within noise"
+    (f,) = learning_curve_findings(_curve([0.30, 0.20, 0.25]), fl)  # rises at the boundary
+    assert f.verdict == "differs"

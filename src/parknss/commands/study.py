@@ -6,7 +6,8 @@
 ``<out>/cache`` that every study run into the same ``--out`` with the same budget,
 campaign, configs and floor shares and resumes; an ``--out`` holding anything else is
 refused unless ``--overwrite`` (:func:`parknss.experiments.studies.run_study`);
-``--floor`` names the seed-noise floor (``measure``, ``paper`` or a seed-noise JSON);
+``--floor`` names the seed-noise floor that judges the learning curve, the ablations and
+the limiter (``measure``, ``paper`` or a seed-noise JSON);
 fits are read from the result store (``--store DIR|off``; ``--refit``: fit them all).
 ``parknss study estimate`` lists each study's fits, those the result store holds, and the
 CPU hours of the rest (:mod:`parknss.experiments.plan`).

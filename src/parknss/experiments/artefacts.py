@@ -98,9 +98,10 @@ def learning_curve_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.study_tables import learning_curve_tables
     from parknss.report.study_figures import draw_learning_curve
 
+    floor = seed_noise_result(ctx).floor
     res = learning_curve(ctx.experiments_config(), ctx.quick, ctx.sweep())
     fig = draw_learning_curve(res, ctx.out_dir / "learning_curve.png")
-    return ArtefactResult(learning_curve_tables(res), [fig], learning_curve_findings(res))
+    return ArtefactResult(learning_curve_tables(res), [fig], learning_curve_findings(res, floor))
 
 
 @register("table3", "Table III: design ablations", "§V-C, Table III")

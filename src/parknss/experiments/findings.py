@@ -9,6 +9,7 @@ of *no* difference (Euler ties RK4, the limiter is redundant) is confirmed by it
 
 from __future__ import annotations
 
+import itertools
 import math
 
 from parknss.experiments.ablations import AblationResult
@@ -208,23 +209,29 @@ def limiter_findings(res: LimiterResult) -> list[Finding]:
     return [f1, f2]
 
 
-def learning_curve_findings(res: LearningCurveResult) -> list[Finding]:
-    """Still descending at the data boundary."""
+def learning_curve_findings(res: LearningCurveResult, floor) -> list[Finding]:
+    """Still descending at the data boundary: every step to the next larger training set
+    lowers the vx fold mean beyond the seed-noise floor (agrees), one raises it beyond the
+    floor (differs), else within noise."""
     fit = res.fits.get("vx")
-    means = ", ".join(f"{n}: {m:.4g}" for n, m in zip(res.sizes(), res.means("vx"), strict=True))
-    desc = res.descending("vx")
-    text = f"vx fold means {means} (km/h)²"
+    sizes, means = res.sizes(), res.means("vx")
+    listed = ", ".join(f"{n}: {m:.4g}" for n, m in zip(sizes, means, strict=True))
+    # each step's fall relative to the smaller set's error: > 0 where the curve falls
+    steps = [-relative_effect(b, a) for a, b in itertools.pairwise(means)]
+    falls = ", ".join(f"{n0}->{n1} {_pct(-e)}" for (n0, n1), e in
+                      zip(itertools.pairwise(sizes), steps, strict=True))
+    text = f"vx fold means {listed} (km/h)²; steps {falls}"
     if fit is not None:
         text += (
             f"; fit {fit.a:.3g}·n^-{fit.b:.2f}, all-{res.extrapolate_to} estimate "
             f"{res.extrapolated('vx'):.4g}"
         )
-    agrees = desc and fit is not None and fit.b > 0
+    verdict = _lower_is(steps, floor, "vx") if steps else None
     return [
         Finding(
             "The vx error falls monotonically from 4 to 12 trials, still descending",
-            text,
-            agrees,
+            f"{text}; {floor.describe()}",
+            verdict,
         )
     ]
 

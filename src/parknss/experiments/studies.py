@@ -145,7 +145,8 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
             from parknss.experiments.learning_curve import learning_curve
 
             res = learning_curve(cfg, quick, sweep)
-            tables, found = st.learning_curve_tables(res), fnd.learning_curve_findings(res)
+            found = fnd.learning_curve_findings(res, _floor(floor, cfg, quick, sweep, log))
+            tables = st.learning_curve_tables(res)
             figure = fig.draw_learning_curve(res, out / "learning_curve.png")
         elif name == "seed-noise":
             from parknss.experiments.noise import seed_noise
