@@ -107,3 +107,11 @@ def test_the_learning_curve_descends_only_beyond_the_floor():
     assert f.verdict == "within noise"
     (f,) = learning_curve_findings(_curve([0.30, 0.20, 0.25]), fl)  # rises at the boundary
     assert f.verdict == "differs"
+
+
+def test_reverse_tracking_compares_the_fold_means():
+    from parknss.experiments.findings import table2_findings
+
+    assert table2_findings(0.108, 0.057)[0].verdict == "agrees"
+    (f,) = table2_findings(0.116, 0.182)
+    assert f.verdict == "differs" and "+56.9 %" in f.measured

@@ -155,6 +155,7 @@ def fig4_artefact(ctx: RunContext) -> ArtefactResult:
 @register("table2", "Table II and Fig. 5: four-fold cross-validation", "§V-A, Table II, Fig. 5")
 def table2_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.cv import COLUMNS, run_cv
+    from parknss.experiments.findings import table2_findings
     from parknss.nss.checkpoint import load_model
     from parknss.nss.predict import predict_trials
     from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
@@ -187,18 +188,20 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *(label for _, label in COLUMNS)],
         rows,
     )
+    nss = res.summary("errors")["nss"]
+    found = table2_findings(nss["vx_mse_moving_kmh2"]["mean"], nss["vx_mse_reverse_kmh2"]["mean"])
     fold0 = res.folds["nss"][0]
     model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
                       if d and (Path(d) / "model.json").is_file()), None)
     if model_dir is None:  # scores from the result store, which keeps no weights
-        return ArtefactResult([table], [], notes="Fig. 5 is not drawn: the NSS fold-0 model "
+        return ArtefactResult([table], [], found, notes="Fig. 5 is not drawn: the NSS fold-0 model "
                               "is not on this machine (its scores came from the result store, "
                               "which keeps no weights); --refit draws it.")
     campaign = ctx.campaign()
     val = pick_maneuvers([campaign[i] for i in fold0["val"]])
     pred = predict_trials(load_model(model_dir).model, val)
     fig = draw_rollouts(val, pred, ctx.out_dir / "fig5_rollouts.png", fold0.get("window_length"))
-    return ArtefactResult([table], [fig])
+    return ArtefactResult([table], [fig], found)
 
 
 @register("time_to_accuracy", "Time to accuracy: paper vs fast training recipe", "§IV-B")

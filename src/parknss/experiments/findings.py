@@ -236,6 +236,21 @@ def learning_curve_findings(res: LearningCurveResult, floor) -> list[Finding]:
     ]
 
 
+def table2_findings(vx: float, reverse: float) -> list[Finding]:
+    """§V-A: the reverse segments are tracked as closely as the forward bursts; from the
+    NSS's fold-mean moving-region vx MSE and reverse vx MSE, (km/h)²."""
+    return [
+        Finding(
+            "Reverse segments are tracked as closely as the forward bursts (reverse vx "
+            "0.057 vs vx 0.108)",
+            f"fold means: reverse vx {reverse:.4g}, vx {vx:.4g} (km/h)² "
+            f"(reverse {_pct(relative_effect(reverse, vx))})",
+            reverse <= vx if math.isfinite(reverse) and math.isfinite(vx) else None,
+            "not finite",
+        )
+    ]
+
+
 def seed_noise_findings(res: SeedNoiseResult) -> list[Finding]:
     """The floor itself, for reference (a measurement, not a claim to test)."""
     return [
