@@ -109,9 +109,21 @@ def test_the_learning_curve_descends_only_beyond_the_floor():
     assert f.verdict == "differs"
 
 
-def test_reverse_tracking_compares_the_fold_means():
+def test_table2_findings_compare_the_fold_means():
+    from parknss.experiments.cv import CVResult
     from parknss.experiments.findings import table2_findings
 
-    assert table2_findings(0.108, 0.057)[0].verdict == "agrees"
-    (f,) = table2_findings(0.116, 0.182)
-    assert f.verdict == "differs" and "+56.9 %" in f.measured
+    def fold(vx, rev, within, beyond):
+        return {"errors": {"vx_mse_moving_kmh2": vx, "vx_mse_reverse_kmh2": rev,
+                           "vx_mse_within_kmh2": within, "vx_mse_beyond_kmh2": beyond,
+                           "yaw_mse_within_degs2": 1.0, "yaw_mse_beyond_degs2": 0.5}}
+
+    def res(*folds):
+        return CVResult(folds={"nss": list(folds)})
+
+    rev, hor = table2_findings(res(fold(0.1, 0.05, 0.1, 0.05), fold(0.116, 0.064, 0.1, 0.09)))
+    assert rev.verdict == "agrees" and hor.verdict == "agrees"
+    assert "vx 0.1 / 0.07" in hor.measured
+    # the means decide: one fold worse beyond the horizon, the mean too (0.125 > 0.1)
+    rev, hor = table2_findings(res(fold(0.116, 0.182, 0.1, 0.05), fold(0.116, 0.182, 0.1, 0.2)))
+    assert rev.verdict == "differs" and "+56.9 %" in rev.measured and hor.verdict == "differs"

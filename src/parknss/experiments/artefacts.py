@@ -188,8 +188,7 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *(label for _, label in COLUMNS)],
         rows,
     )
-    nss = res.summary("errors")["nss"]
-    found = table2_findings(nss["vx_mse_moving_kmh2"]["mean"], nss["vx_mse_reverse_kmh2"]["mean"])
+    found = table2_findings(res)
     fold0 = res.folds["nss"][0]
     model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
                       if d and (Path(d) / "model.json").is_file()), None)
