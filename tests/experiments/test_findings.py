@@ -127,3 +127,23 @@ def test_table2_findings_compare_the_fold_means():
     # the means decide: one fold worse beyond the horizon, the mean too (0.125 > 0.1)
     rev, hor = table2_findings(res(fold(0.116, 0.182, 0.1, 0.05), fold(0.116, 0.182, 0.1, 0.2)))
     assert rev.verdict == "differs" and "+56.9 %" in rev.measured and hor.verdict == "differs"
+
+
+def test_seed_spread_is_of_the_order_of_the_fold_spread_within_the_factor():
+    from parknss.experiments.cv import CVResult
+    from parknss.experiments.findings import seed_spread_finding
+    from parknss.experiments.noise import NoiseFloor, SeedNoiseResult
+    from parknss.experiments.sweep import FoldScore
+
+    def seeds(*vx):
+        scores = [FoldScore(v, v, 1.0, v, 1.0, 1.0, 3, 12, 10) for v in vx]
+        return SeedNoiseResult("cv", 1, list(range(len(vx))), scores,
+                               NoiseFloor(0.02, 0.035, len(vx), "measured"), 3000)
+
+    # the paper's own numbers: seed std 0.019 against fold std 0.038, a factor 2
+    cv = CVResult(folds={"nss": [{"errors": {"vx_mse_moving_kmh2": v}}
+                                 for v in (0.057, 0.095, 0.121, 0.160)]})
+    f = seed_spread_finding(cv, seeds(0.07, 0.108), 3.0)  # std 0.019
+    assert f.verdict == "agrees" and "0.089 ± 0.019" in f.measured
+    assert seed_spread_finding(cv, seeds(0.089, 0.0895), 3.0).verdict == "differs"
+    assert seed_spread_finding(cv, None, 3.0).verdict == "not measured"

@@ -155,7 +155,7 @@ def fig4_artefact(ctx: RunContext) -> ArtefactResult:
 @register("table2", "Table II and Fig. 5: four-fold cross-validation", "§V-A, Table II, Fig. 5")
 def table2_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.cv import COLUMNS, run_cv
-    from parknss.experiments.findings import table2_findings
+    from parknss.experiments.findings import seed_spread_finding, table2_findings
     from parknss.nss.checkpoint import load_model
     from parknss.nss.predict import predict_trials
     from parknss.report.nss_figures import draw_rollouts, pick_maneuvers
@@ -188,7 +188,9 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *(label for _, label in COLUMNS)],
         rows,
     )
-    found = table2_findings(res)
+    # the seed spread beside the fold spread when this run has measured it (reproduce all)
+    found = [*table2_findings(res), seed_spread_finding(
+        res, ctx.memo.get("seed_noise"), ctx.experiments_config().same_order)]
     fold0 = res.folds["nss"][0]
     model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
                       if d and (Path(d) / "model.json").is_file()), None)

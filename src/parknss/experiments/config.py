@@ -142,6 +142,9 @@ class ExperimentsConfig(StrictModel):
         description="the paper's seed CVs; used only where no floor was measured",
     )
     divergence_factor: float = Field(2.0, gt=1.0)
+    same_order: float = Field(
+        3.0, gt=1.0, description="two spreads are 'of the same order' within this factor"
+    )
     learning_curve_rs: list[int] = Field([1, 2, 3])
     extrapolate_to: int = Field(16, ge=1, description="training trials of the all-16 model")
     seed_noise_split: SplitRef = SplitRef(index=1)
