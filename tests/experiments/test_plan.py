@@ -133,3 +133,30 @@ def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
     assert given.epoch == {FUSED: 1.5} and given.update == 0.2 and not given.timed
     with pytest.raises(ConfigError, match="non-positive"):
         time_rates(data, {}, set(), load_campaign(data), said.append, 0.0, 0.2)
+
+
+def test_estimate_counts_a_limiter_fit_and_the_fold_fits_it_answers_once(tiny, tmp_path):
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    studies = ("limiter", "seed-noise", "learning-curve")
+    est = estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
+                   sec_per_update=0.1, studies=studies)
+    b = cfg.budget(False)
+    by = {s.study: s for s in est.studies}
+    # seed 0 of the seed-noise fold and the learning curve's r = 1 folds are limiter fits
+    assert est.total.fits == len(b.folds) + (len(b.seeds) - 1) + (
+        len(cfg.learning_curve_rs) - 1) * len(b.folds)
+    assert sum(by[n].fits for n in studies) - est.total.fits == 1 + len(b.folds)
+    for job in study_jobs("limiter", cfg, False, sweep):
+        store.put(job, {"stub": True}, wall_s=1.0, cpu_s=1.0)
+    after = estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
+                     sec_per_update=0.1, studies=studies)
+    by = {s.study: s for s in after.studies}
+    assert (by["limiter"].stored, by["seed-noise"].stored) == (len(b.folds), 1)
+    assert by["learning-curve"].stored == len(b.folds)
+    # a fold job asked first: answered through the alias, and a limiter entry without its
+    # fold part is not taken for one
+    fold = next(j for j in study_jobs("learning-curve", cfg, False, sweep)
+                if j.kwargs["split"] == "cv")
+    assert store.get(fold) == (False, None)  # the stubs have no "fold" part

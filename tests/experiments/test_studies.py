@@ -210,3 +210,34 @@ def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tm
     with pytest.raises(MissingResultsError, match=r"6 of 6 fits .* \(loss/MAE LR 0.001 f0, "):
         ablations(cfg, False, _sweep(data, store=ResultStore(
             tmp_path / "other", log=lambda msg: None, fit_missing=False)), floor)
+
+
+def test_the_limiter_fits_answer_the_fold_fits_of_the_other_studies(tiny, tmp_path):
+    """A stored limiter fit is its fold's fit (limiter_job runs fold_job on the same
+    arguments): after the limiter study, Table III's deployed option, the learning curve
+    at r = 1 (spelled as the CV fold it is) and the seed-noise fold's seed 0 are read from
+    the store, equal to fitting them, and nothing is fitted twice."""
+    from parknss.executor import Tally
+    from parknss.experiments.learning_curve import curve_jobs
+    from parknss.experiments.limiter_study import limiter_jobs
+    from parknss.experiments.noise import seed_jobs
+    from parknss.experiments.store import ResultStore
+
+    data, cfg = tiny
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    lim = _sweep(data, store=store).run(limiter_jobs(cfg, False, _sweep(data)), "limiter")
+    folds = [j for r, j in curve_jobs(cfg, False, _sweep(data)) if r == 1]
+    assert [j.kwargs["split"] for j in folds] == ["cv", "cv"]  # r = 1 is the CV fold
+    # Table III's deployed option on fold 0
+    assert folds[0].key() in {j.key() for j in ablation_jobs(cfg, False, _sweep(data))}
+    seed0 = seed_jobs(cfg, cfg.budget(False), _sweep(data))[0]
+    assert seed0.key() == folds[1].key()  # the seed-noise study's fold 1, seed 0
+    tally = Tally()
+    got = _sweep(data, store=store, tally=tally).run(folds, "curve r=1")
+    assert tally.to_json() == {"cache": 0, "store": 2, "computed": 0}
+    fitted = _sweep(data).run(folds, "refit")  # the same fits made directly
+    for a, b, limited in zip(got, fitted, lim, strict=True):
+        assert a["errors"] == b["errors"] == limited["fold"]["errors"]
+        assert a["model_dir"] is None
+    assert [j.kwargs["split"] for r, j in curve_jobs(cfg, False, _sweep(data)) if r > 1] == [
+        "leave"] * 4

@@ -80,6 +80,20 @@ def seed_noise_result(ctx: RunContext):
     return ctx.memo["seed_noise"]
 
 
+@register("limiter", "Inference limiter study", "§V-B")
+def limiter_artefact(ctx: RunContext) -> ArtefactResult:
+    from parknss.experiments.findings import limiter_findings
+    from parknss.experiments.limiter_study import limiter_study
+    from parknss.experiments.study_tables import limiter_tables
+    from parknss.report.study_figures import draw_limiter
+
+    # the floor after the limiter's fits: they answer the seed-noise fit of their fold
+    res = limiter_study(ctx.experiments_config(), ctx.quick, ctx.sweep(),
+                        lambda: seed_noise_result(ctx).floor)
+    fig = draw_limiter(res, ctx.out_dir / "limiter.png")
+    return ArtefactResult(limiter_tables(res), [fig], limiter_findings(res))
+
+
 @register("seed_noise", "Seed-noise floor", "§IV-B, §V-A")
 def seed_noise_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.findings import seed_noise_findings
@@ -119,19 +133,6 @@ def table3_artefact(ctx: RunContext) -> ArtefactResult:
         "implemented in parknss.nss; only smaller plain nets are compared."
     )
     return ArtefactResult(ablation_tables(res), [fig], ablation_findings(res), notes)
-
-
-@register("limiter", "Inference limiter study", "§V-B")
-def limiter_artefact(ctx: RunContext) -> ArtefactResult:
-    from parknss.experiments.findings import limiter_findings
-    from parknss.experiments.limiter_study import limiter_study
-    from parknss.experiments.study_tables import limiter_tables
-    from parknss.report.study_figures import draw_limiter
-
-    floor = seed_noise_result(ctx).floor
-    res = limiter_study(ctx.experiments_config(), ctx.quick, ctx.sweep(), floor)
-    fig = draw_limiter(res, ctx.out_dir / "limiter.png")
-    return ArtefactResult(limiter_tables(res), [fig], limiter_findings(res))
 
 
 @register("fig4", "Fig. 4: convergence probe", "§IV-B, Fig. 4")

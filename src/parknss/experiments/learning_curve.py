@@ -26,6 +26,7 @@ from parknss.data.splits import DEFAULT_FOLDS, stratify_problem
 from parknss.errors import DataError
 from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig
+from parknss.experiments.folds import fold_plan, make_fold
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, nanmean
 
 
@@ -130,14 +131,22 @@ def grid_note(
 
 
 def curve_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[tuple[int, Job]]:
-    """(r, job) for every (r, fold) of the grid, at the budget's study overrides."""
+    """(r, job) for every (r, fold) of the grid, at the budget's study overrides. A
+    leave-r-out fold that is the CV fold of its index (the same training and held-out
+    trials: r = 1 on a stratified campaign) is spelled as that CV fold, so its fit is the
+    one Table III's deployed option, the limiter study and the seed-noise study make."""
     budget = cfg.budget(quick)
     ov = budget.study_overrides()
-    return [
-        (r, fold_spec(sweep, "leave", k, ov, r=r, name=f"leave{r} fold{k}"))
-        for r in cfg.learning_curve_rs
-        for k in budget.folds
-    ]
+    campaign = sweep.campaign()
+    cv = fold_plan(campaign, "cv").folds
+    jobs = []
+    for r in cfg.learning_curve_rs:
+        for k in budget.folds:
+            leave = make_fold(campaign, "leave", k, r)
+            same = k < len(cv) and (leave.train, leave.val) == (cv[k].train, cv[k].val)
+            split, rr = ("cv", 1) if same else ("leave", r)
+            jobs.append((r, fold_spec(sweep, split, k, ov, r=rr, name=f"leave{r} fold{k}")))
+    return jobs
 
 
 def learning_curve(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> LearningCurveResult:

@@ -13,6 +13,7 @@ not finite.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from parknss.executor import Job
@@ -79,11 +80,16 @@ def limiter_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]
 
 
 def limiter_study(
-    cfg: ExperimentsConfig, quick: bool, sweep: Sweep, floor: NoiseFloor
+    cfg: ExperimentsConfig, quick: bool, sweep: Sweep,
+    floor: NoiseFloor | Callable[[], NoiseFloor],
 ) -> LimiterResult:
-    """Every fold of the budget under the three limiter variants."""
+    """Every fold of the budget under the three limiter variants; ``floor`` or a function
+    that gives it once the limiter fits are done (which then answer the seed-noise
+    study's fit of its fold: :data:`~parknss.experiments.store.ALIASES`)."""
     budget = cfg.budget(quick)
     results = sweep.run(limiter_jobs(cfg, quick, sweep), "limiter")
+    if callable(floor):
+        floor = floor()
     scores = []
     for v in VARIANTS:
         errs = [r["variants"][v] for r in results]

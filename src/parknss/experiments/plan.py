@@ -272,10 +272,12 @@ def estimate(
     shapes: dict[str, FitShape] = {}
     held: dict[str, bool] = {}
     rows: dict[str, list[str]] = {}  # the distinct fits of each row, by fit key
-    for name, jobs in plan_rows(cfg, quick, sweep, studies).items():
+    planned = plan_rows(cfg, quick, sweep, studies)
+    ids = {_identity(job) for jobs in planned.values() for job in jobs}
+    for name, jobs in planned.items():
         keys = rows[name] = []
         for job in jobs:
-            key = _identity(job)
+            key = _identity(job, ids)
             if key not in keys:
                 keys.append(key)
             if key not in shapes:
@@ -297,9 +299,15 @@ def estimate(
     return Estimate(per, cost("total (distinct)", list(shapes)), rates)
 
 
-def _identity(job: Job) -> str:
-    """The fit a job makes (:func:`~parknss.experiments.store.fit_key`): shared fits meet."""
-    from parknss.experiments.store import fit_key
+def _identity(job: Job, planned: set[str] | None = None) -> str:
+    """The fit a job makes (:func:`~parknss.experiments.store.fit_key`): shared fits meet,
+    and a job that a ``planned`` job answers (:data:`~parknss.experiments.store.ALIASES`:
+    the limiter fit of a fold is its fold fit) is that job's fit."""
+    from parknss.experiments.store import ALIASES, fit_key
 
-    return fit_key(job.fn, job.kwargs)
+    own = fit_key(job.fn, job.kwargs)
+    if planned and job.fn in ALIASES:
+        twin = fit_key(ALIASES[job.fn][0], job.kwargs)
+        return twin if twin in planned else own
+    return own
 

@@ -42,6 +42,7 @@ from typing import Any
 from parknss.config import PACKAGE_DIR, REPO_ROOT
 from parknss.errors import ConfigError
 from parknss.executor import Job, resolve
+from parknss.experiments.sweep import FOLD_JOB, LIMITER_JOB
 
 ENV_VAR = "PARKNSS_RESULTS"
 OFF = "off"
@@ -262,6 +263,15 @@ def _nss_config(kwargs: Mapping[str, Any]) -> dict | None:
     return fold_config(kwargs.get("config"), kwargs.get("overrides")).model_dump(mode="json")
 
 
+ALIASES: dict[str, tuple[str, str]] = {FOLD_JOB: (LIMITER_JOB, "fold")}
+"""Jobs a stored entry of another job answers: job function -> (answering function, the
+part of its result that is this job's result). A limiter job runs the fold job of the same
+arguments (only saving its model to a temporary folder) and returns that result as its
+``"fold"``, so a stored limiter fit is also the fold fit of its fold: the limiter study's
+folds are the deployed-configuration folds of Table III, the learning curve at r = 1 and
+the seed-noise fold's seed 0. Checked by tests/experiments/test_store.py."""
+
+
 class ResultStore:
     """The store at ``root`` (see the module doc); ``read``/``write`` switch the lookup and
     the recording off (``refit``, quick runs); ``fit_missing`` False makes a fit it lacks
@@ -294,6 +304,22 @@ class ResultStore:
         return self.root / short_name(job.fn) / f"{self.entry_key(job)[0]}.json"
 
     def get(self, job: Job) -> tuple[bool, Any]:
+        """(True, result) of ``job`` from its own entry, else from the entry of a job that
+        answers it (:data:`ALIASES`); (False, None) when neither is stored."""
+        hit, value = self._get(job)
+        if hit or job.fn not in ALIASES:
+            return hit, value
+        fn, part = ALIASES[job.fn]
+        hit, value = self._get(Job(fn, job.kwargs, job.name))
+        if not hit:
+            return False, None
+        if not isinstance(value, dict) or not isinstance(value.get(part), dict):
+            self.log(f"the stored {short_name(fn)} result of {job.name or 'a job'} has no "
+                     f"{part!r} part; ignored, refitting")
+            return False, None
+        return True, {**value[part], "model_dir": None}  # the answering job's model is gone
+
+    def _get(self, job: Job) -> tuple[bool, Any]:
         if not self.read:
             return False, None
         key = self.entry_key(job)[0]
