@@ -180,6 +180,8 @@ def test_a_study_runs_again_from_the_store(tmp_path, tiny_study, capsys):
     first = _study(data, cfg, tmp_path / "a", store)
     n = first["sources"]["fitted"]
     assert n == 3 and first["sources"]["store"] == 0
+    # each fit kept its resumable training state in the run folder, under its fit key
+    assert len(list((tmp_path / "a" / "state").iterdir())) == n
     second = _study(data, cfg, tmp_path / "b", store)  # another sitting, another folder
     assert second["sources"] == {"run_cache": 0, "store": n, "fitted": 0}
     assert second["result"] == first["result"] and second["findings"] == first["findings"]

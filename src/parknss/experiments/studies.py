@@ -138,7 +138,8 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
         tally = Tally()
         sweep = Sweep(inputs.executor, inputs.workers, inputs.address, out / "cache",
                       str(data) if data else None, inputs.progress,
-                      open_store(inputs.store, cfg, quick, inputs.refit), tally)
+                      open_store(inputs.store, cfg, quick, inputs.refit), tally,
+                      state_root=out / "state")  # a killed fit resumes mid-fit
         floor = inputs.floor
         t0 = time.perf_counter()
         if name == "learning-curve":
