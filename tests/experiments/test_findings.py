@@ -147,3 +147,16 @@ def test_seed_spread_is_of_the_order_of_the_fold_spread_within_the_factor():
     assert f.verdict == "agrees" and "0.089 ± 0.019" in f.measured
     assert seed_spread_finding(cv, seeds(0.089, 0.0895), 3.0).verdict == "differs"
     assert seed_spread_finding(cv, None, 3.0).verdict == "not measured"
+
+
+def test_an_unmeasured_axis_says_how_many_fits_it_lacks():
+    from parknss.experiments.ablations import UnmeasuredAxis
+
+    res = _ablations({})
+    res.unmeasured = [UnmeasuredAxis(n, 3, 16) for n in ("normalization", "lr schedule",
+                                                            "integrator", "capacity")]
+    for start in ("Clipped", "Cosine", "Euler", "The deployed six"):
+        f = _finding(res, start)
+        assert f.verdict == "not measured" and f.measured == (
+            "not measured: 3 of 16 fits are not stored")
+    assert "not in the ablation config" in _finding(res, "MAE").measured

@@ -43,11 +43,13 @@ def _lower_is(effects: list[float], floor, channel: str) -> bool | None:
     return None
 
 
-def _axis_missing(claim: str, name: str, res: AblationResult | None = None) -> Finding:
-    """Not measured: the axis is unmeasured in ``res`` (its fits are not stored) or is not
-    in the ablation config."""
+def _axis_missing(claim: str, name: str, res: AblationResult | None = None,
+                  needs: str = "") -> Finding:
+    """Not measured: the axis ``name`` is unmeasured in ``res`` (its fits are not stored),
+    or it (with the option it ``needs``) is not in the ablation config."""
     gap = res.unmeasured_axis(name) if res is not None else None
-    why = gap.describe() if gap else f"axis {name!r} is not in the ablation config"
+    why = gap.describe() if gap else (
+        f"axis {name!r}{f' ({needs})' if needs else ''} is not in the ablation config")
     return Finding(claim, why, None, NOT_MEASURED)
 
 
@@ -110,7 +112,7 @@ def _normalization_finding(res: AblationResult) -> Finding:
     plain = _option(ax, "plain") if ax else None
     z = _option(ax, "z-score") if ax else None
     if ax is None or plain is None or z is None:
-        return _axis_missing(claim, "normalization (with plain min-max and z-score)", res)
+        return _axis_missing(claim, "normalization", res, "with plain min-max and z-score")
     fl = res.floor
     e_plain, e_z = ax.effect(plain.label, "vx"), ax.effect(z.label, "vx")
     tie, penalty = fl.confirms_null(e_plain, "vx"), _lower_is([e_z], fl, "vx")
@@ -124,7 +126,7 @@ def _schedule_finding(res: AblationResult) -> Finding:
     ax = res.axis("lr schedule")
     const = _option(ax, "constant") if ax else None
     if ax is None or const is None:
-        return _axis_missing(claim, "lr schedule (with a constant option)", res)
+        return _axis_missing(claim, "lr schedule", res, "with a constant option")
     fl = res.floor
     e_vx, e_yaw = ax.effect(const.label, "vx"), ax.effect(const.label, "yaw")
     favours, tie = _lower_is([e_vx], fl, "vx"), fl.confirms_null(e_yaw, "yaw")
@@ -150,7 +152,7 @@ def _integrator_finding(res: AblationResult) -> Finding:
     labels = [o.label for o in ax.options] if ax else []
     rk4 = next((lbl for lbl in labels if "rk4" in lbl.lower()), None)
     if ax is None or rk4 is None:
-        return _axis_missing(claim, "integrator (with an RK4 option)", res)
+        return _axis_missing(claim, "integrator", res, "with an RK4 option")
     eager = next((lbl for lbl in labels if "eager" in lbl.lower()), None)
     fl = res.floor
     # accuracy against the eager Euler when there is one: the same engine and budget
