@@ -13,6 +13,7 @@ from parknss.cli import main
 from parknss.config import PACKAGE_DIR, REPO_ROOT
 from parknss.executor import Job, Tally, run_jobs
 from parknss.experiments.config import load_experiments_config
+from parknss.experiments.jobs import FOLD_JOB
 from parknss.experiments.store import (
     CODE_FILES,
     ResultStore,
@@ -25,7 +26,6 @@ from parknss.experiments.store import (
     store_dir,
 )
 from parknss.experiments.studies import StudyInputs, run_study
-from parknss.experiments.sweep import FOLD_JOB
 
 PROBE = "parknss.experiments.probe:probe_fit"
 

@@ -19,8 +19,9 @@ from dataclasses import asdict, dataclass
 from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig
 from parknss.experiments.folds import VARIANTS
+from parknss.experiments.jobs import LIMITER_JOB
 from parknss.experiments.noise import NoiseFloor
-from parknss.experiments.sweep import LIMITER_JOB, Sweep, fold_spec, nanmean, relative_effect
+from parknss.experiments.sweep import Sweep, fold_spec, nanmean, relative_effect
 
 
 def _get(errors: dict, key: str) -> float:

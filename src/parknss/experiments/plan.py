@@ -179,7 +179,7 @@ def time_rates(
     ``overrides``; a rate given is not timed (then every engine class costs it)."""
     from parknss.experiments.config import merge_overrides
     from parknss.experiments.folds import fold_job
-    from parknss.experiments.sweep import FOLD_JOB
+    from parknss.experiments.jobs import FOLD_JOB
 
     def cpu_of(ov: dict) -> float:
         cpu0 = time.process_time()
@@ -301,9 +301,10 @@ def estimate(
 
 def _identity(job: Job, planned: set[str] | None = None) -> str:
     """The fit a job makes (:func:`~parknss.experiments.store.fit_key`): shared fits meet,
-    and a job that a ``planned`` job answers (:data:`~parknss.experiments.store.ALIASES`:
+    and a job that a ``planned`` job answers (:data:`~parknss.experiments.jobs.ALIASES`:
     the limiter fit of a fold is its fold fit) is that job's fit."""
-    from parknss.experiments.store import ALIASES, fit_key
+    from parknss.experiments.jobs import ALIASES
+    from parknss.experiments.store import fit_key
 
     own = fit_key(job.fn, job.kwargs)
     if planned and job.fn in ALIASES:

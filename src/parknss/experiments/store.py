@@ -42,7 +42,7 @@ from typing import Any
 from parknss.config import PACKAGE_DIR, REPO_ROOT
 from parknss.errors import ConfigError
 from parknss.executor import Job, resolve
-from parknss.experiments.sweep import FOLD_JOB, LIMITER_JOB
+from parknss.experiments.jobs import ALIASES
 
 ENV_VAR = "PARKNSS_RESULTS"
 OFF = "off"
@@ -261,15 +261,6 @@ def _nss_config(kwargs: Mapping[str, Any]) -> dict | None:
     from parknss.experiments.folds import fold_config
 
     return fold_config(kwargs.get("config"), kwargs.get("overrides")).model_dump(mode="json")
-
-
-ALIASES: dict[str, tuple[str, str]] = {FOLD_JOB: (LIMITER_JOB, "fold")}
-"""Jobs a stored entry of another job answers: job function -> (answering function, the
-part of its result that is this job's result). A limiter job runs the fold job of the same
-arguments (only saving its model to a temporary folder) and returns that result as its
-``"fold"``, so a stored limiter fit is also the fold fit of its fold: the limiter study's
-folds are the deployed-configuration folds of Table III, the learning curve at r = 1 and
-the seed-noise fold's seed 0. Checked by tests/experiments/test_store.py."""
 
 
 class ResultStore:

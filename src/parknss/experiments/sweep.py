@@ -22,12 +22,8 @@ import numpy as np
 from parknss.config import override
 from parknss.executor import Job, Store, Tally, run_jobs
 from parknss.experiments.config import Overrides
+from parknss.experiments.jobs import FOLD_JOB, STATEFUL_JOBS
 from parknss.nss.config import NSSConfig
-
-FOLD_JOB = "parknss.experiments.folds:fold_job"
-LIMITER_JOB = "parknss.experiments.folds:limiter_job"
-STATEFUL_JOBS: tuple[str, ...] = (FOLD_JOB, LIMITER_JOB)
-"""Jobs that take a ``state_dir`` (they fit through :func:`~parknss.experiments.folds.fold_job`)."""
 
 
 @dataclass
