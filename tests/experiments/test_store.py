@@ -350,3 +350,21 @@ def test_time_to_accuracy_of_two_known_curves():
     old["history"]["cpu_s"] = [None, None]
     with pytest.raises(DataError, match="no CPU times"):
         Curve.from_result(old)
+
+
+def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_study, capsys):
+    from parknss.errors import ConfigError
+    from parknss.experiments.studies import run_progress_of
+
+    data, cfg = tiny_study
+    _study(data, cfg, tmp_path / "a", tmp_path / "results")
+    rows = run_progress_of(tmp_path / "a")
+    assert sorted(r.name for r in rows) == ["seed 0", "seed 1", "seed 2"]
+    assert all(r.done and r.step == r.steps == 2 and r.cpu_s > 0 for r in rows)
+    assert main(["study", "progress", str(tmp_path / "a")]) == 0
+    assert "3 fits with a training state, 3 done" in capsys.readouterr().out
+    (tmp_path / "a" / "state" / rows[0].folder / "train_state.json").write_text("{")
+    bad = next(r for r in run_progress_of(tmp_path / "a") if r.folder == rows[0].folder)
+    assert bad.error.startswith("JSONDecodeError") and not bad.done
+    with pytest.raises(ConfigError, match="not a run folder manifest"):
+        run_progress_of(tmp_path / "nowhere")

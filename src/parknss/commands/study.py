@@ -10,7 +10,8 @@ refused unless ``--overwrite`` (:func:`parknss.experiments.studies.run_study`);
 the limiter (``measure``, ``paper`` or a seed-noise JSON);
 fits are read from the result store (``--store DIR|off``; ``--refit``: fit them all).
 ``parknss study estimate`` lists each study's fits, those the result store holds, and the
-CPU hours of the rest (:mod:`parknss.experiments.plan`).
+CPU hours of the rest (:mod:`parknss.experiments.plan`); ``parknss study progress OUT``
+how far each fit of a run folder has got (:mod:`parknss.experiments.progress`).
 """
 
 from __future__ import annotations
@@ -78,6 +79,25 @@ def register(app: typer.Typer) -> None:
 
     for name in STUDIES:
         study_app.command(name)(_make(name))
+
+    @study_app.command("progress")
+    def progress_cmd(
+        out: Path = typer.Argument(..., help="Run folder of parknss reproduce or study."),
+        as_json: bool = json_opt,
+    ) -> None:
+        """How far each fit of a run folder has got (its training state), named by the plan."""
+        from parknss.experiments.progress import HEADER
+        from parknss.experiments.studies import run_progress_of
+
+        rows = run_progress_of(out)
+        if as_json:
+            typer.echo(json.dumps([r.to_json() for r in rows], indent=2))
+            return
+        typer.echo(HEADER)
+        for r in rows:
+            typer.echo(r.line())
+        done = sum(r.done for r in rows)
+        typer.echo(f"{len(rows)} fits with a training state, {done} done")
 
     @study_app.command("estimate")
     def estimate_cmd(

@@ -130,6 +130,11 @@ class CVResult:
         }
 
 
+def state_folder(variant: str, index: int) -> str:
+    """The name of the training-state folder of a Table II fit (under ``OUT/state``)."""
+    return f"{variant}_fold{index}"
+
+
 def cv_jobs(
     data: str | None,
     config: str | None,
@@ -154,7 +159,7 @@ def cv_jobs(
             if save_dir is not None and model == "nss":
                 kw["save_dir"] = str(save_dir / f"{var}_fold{i}")
                 # the fit's resumable state: a killed run resumes mid-fold, not from epoch 0
-                kw["state_dir"] = str(save_dir.parent / "state" / f"{var}_fold{i}")
+                kw["state_dir"] = str(save_dir.parent / "state" / state_folder(var, i))
             jobs.append((var, Job("parknss.experiments.folds:fold_job", kw, f"{var} fold {i}")))
     return jobs
 

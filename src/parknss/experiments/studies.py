@@ -233,3 +233,23 @@ def estimate(
     sweep = Sweep(data=str(data) if data else None, progress=False)
     return plan_estimate(cfg, quick, sweep, open_store(store, cfg, quick, False, log), log,
                          sec_per_epoch, sec_per_update)
+
+
+def run_progress_of(out: Path) -> list:
+    """:func:`~parknss.experiments.progress.run_progress` of a run folder, at the budget,
+    studies config and campaign its manifest (``run.json``) records."""
+    import json
+
+    from parknss.errors import ConfigError
+    from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.progress import run_progress
+
+    manifest = Path(out) / "run.json"
+    try:
+        args = json.loads(manifest.read_text())["args"]
+    except (OSError, ValueError, KeyError) as exc:
+        raise ConfigError(f"{manifest}: not a run folder manifest ({exc.__class__.__name__})") \
+            from exc
+    cfg = load_experiments_config(args.get("config"))
+    data = args.get("data")
+    return run_progress(Path(out), cfg, bool(args.get("quick")), str(data) if data else None)

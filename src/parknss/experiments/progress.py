@@ -1,0 +1,123 @@
+"""How far the fits of a run folder have got: ``parknss study progress OUT``.
+
+A study fit of ``parknss reproduce`` or ``parknss study`` keeps its resumable training
+state in ``OUT/state/<folder>/`` (``train_state.json`` beside the tensors, written every
+``train.checkpoint_every`` steps; :mod:`parknss.nss.train_state`). This module reads the
+JSON half of each (never the tensors) and names the fit from the run's plan: a folder is
+the fit key (:func:`~parknss.experiments.store.fit_key`) of a study job, or
+``<variant>_fold<i>`` for Table II (:func:`parknss.experiments.cv.state_folder`); the plan
+(:func:`~parknss.experiments.plan.plan_rows` at the run's budget, config and campaign)
+gives the job's name and its total steps (paper recipe: epochs; fast recipe: updates +
+finish epochs). A folder the plan does not know keeps its folder name and no total; a
+state file that does not read is listed as unreadable, with why.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+from parknss.errors import ConfigError
+from parknss.experiments.config import ExperimentsConfig
+from parknss.experiments.sweep import Sweep
+from parknss.nss.history import History
+from parknss.nss.train_state import FORMAT, META
+
+
+@dataclass
+class FitProgress:
+    """One fit's training state: ``step`` of ``steps`` (None: the plan does not know the
+    fit), CPU and wall seconds so far, the best smoothed criterion and its step, when the
+    state was last written (UTC), or ``error`` when the state does not read."""
+
+    folder: str
+    name: str
+    step: int = 0
+    steps: int | None = None
+    cpu_s: float | None = None
+    wall_s: float | None = None
+    best: float | None = None
+    best_step: int | None = None
+    updated_utc: str = ""
+    error: str = ""
+
+    @property
+    def done(self) -> bool:
+        return self.steps is not None and self.step >= self.steps
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "done": self.done}
+
+    def line(self) -> str:
+        if self.error:
+            return f"{self.name:<40} unreadable: {self.error}"
+        of = f"{self.step}/{self.steps} ({100 * self.step / self.steps:.0f} %)" if (
+            self.steps) else f"{self.step}/?"
+        cpu = "-" if self.cpu_s is None else f"{self.cpu_s:.0f}"
+        best = "-" if self.best is None else f"{self.best:.4g} @ {self.best_step}"
+        return f"{self.name:<40} {of:>18} {cpu:>9} {best:>18}  {self.updated_utc}"
+
+
+HEADER = f"{'fit':<40} {'step':>18} {'CPU s':>9} {'best criterion':>18}  written (UTC)"
+
+
+def read_state(folder: Path, name: str, steps: int | None) -> FitProgress:
+    """The progress in one state folder (see the module doc)."""
+    path = folder / META
+    row = FitProgress(folder.name, name, steps=steps)
+    try:
+        meta = json.loads(path.read_text())
+        if meta.get("format") != FORMAT:
+            raise ValueError("not a parknss training state")
+        hist = History.from_json(meta["history"])
+        row.step = int(meta["epoch"])
+        row.wall_s = float(meta["wall_s"])
+        row.cpu_s = None if meta.get("cpu_s") is None else float(meta["cpu_s"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        row.error = f"{exc.__class__.__name__}: {exc}"
+        return row
+    best_step, best = hist.best()
+    if math.isfinite(best):
+        row.best, row.best_step = best, best_step
+    stamp = datetime.fromtimestamp(path.stat().st_mtime, UTC)
+    row.updated_utc = stamp.strftime("%Y-%m-%d %H:%M")
+    return row
+
+
+def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> dict[str, tuple[str, int]]:
+    """State folder name -> (job name, total steps) of every fit the studies plan."""
+    from parknss.experiments.cv import MODEL_VARIANTS, cv_jobs, state_folder
+    from parknss.experiments.plan import fit_shape, plan_rows
+    from parknss.experiments.store import fit_key
+
+    campaign = sweep.campaign()
+    out: dict[str, tuple[str, int]] = {}
+    for jobs in plan_rows(cfg, quick, sweep).values():
+        for job in jobs:
+            key = fit_key(job.fn, job.kwargs)
+            if key not in out and job.kwargs.get("model", "nss") == "nss":
+                shape = fit_shape(job, campaign)
+                out[key] = (job.name or key, shape.epochs + shape.updates)
+    ov = cfg.budget(quick).deployment_overrides()
+    for var, job in cv_jobs(sweep.data, None, ov, list(MODEL_VARIANTS)):
+        if job.kwargs["model"] == "nss":
+            out[state_folder(var, job.kwargs["index"])] = out[fit_key(job.fn, job.kwargs)]
+    return out
+
+
+def run_progress(out_dir: Path, cfg: ExperimentsConfig, quick: bool,
+                 data: str | None) -> list[FitProgress]:
+    """Every fit with a training state under ``out_dir/state``, named by the plan."""
+    root = Path(out_dir) / "state"
+    if not root.is_dir():
+        raise ConfigError(f"{root} does not exist: no fit of this run has written a "
+                          "training state (is it a parknss reproduce or study run folder?)")
+    names = planned_fits(cfg, quick, Sweep(data=data, progress=False))
+    rows = []
+    for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        name, steps = names.get(folder.name, (folder.name, None))
+        rows.append(read_state(folder, name, steps))
+    return rows
