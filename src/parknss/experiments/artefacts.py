@@ -112,8 +112,8 @@ def learning_curve_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.study_tables import learning_curve_tables
     from parknss.report.study_figures import draw_learning_curve
 
-    floor = seed_noise_result(ctx).floor
     res = learning_curve(ctx.experiments_config(), ctx.quick, ctx.sweep())
+    floor = seed_noise_result(ctx).floor  # after: a stored-only run names the curve's gaps
     fig = draw_learning_curve(res, ctx.out_dir / "learning_curve.png")
     return ArtefactResult(learning_curve_tables(res), [fig], learning_curve_findings(res, floor))
 
