@@ -361,6 +361,7 @@ def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_st
     rows = run_progress_of(tmp_path / "a")
     assert sorted(r.name for r in rows) == ["seed 0", "seed 1", "seed 2"]
     assert all(r.done and r.step == r.steps == 2 and r.cpu_s > 0 for r in rows)
+    assert all(r.uniform and r.cpu_left_s == 0.0 for r in rows)  # paper recipe, done
     assert main(["study", "progress", str(tmp_path / "a")]) == 0
     assert "3 fits with a training state, 3 done" in capsys.readouterr().out
     (tmp_path / "a" / "state" / rows[0].folder / "train_state.json").write_text("{")
@@ -368,3 +369,14 @@ def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_st
     assert bad.error.startswith("JSONDecodeError") and not bad.done
     with pytest.raises(ConfigError, match="not a run folder manifest"):
         run_progress_of(tmp_path / "nowhere")
+
+
+def test_cpu_left_extrapolates_only_a_fit_whose_steps_cost_the_same():
+    from parknss.experiments.progress import FitProgress
+
+    paper = FitProgress("f", "seed 1", step=50, steps=200, cpu_s=100.0, uniform=True)
+    assert paper.cpu_left_s == 300.0 and paper.to_json()["cpu_left_s"] == 300.0
+    assert " 300 " in paper.line()
+    assert FitProgress("f", "fast", step=50, steps=200, cpu_s=100.0).cpu_left_s is None
+    assert FitProgress("f", "?", step=50, cpu_s=100.0, uniform=True).cpu_left_s is None
+    assert FitProgress("f", "new", step=0, steps=200, cpu_s=0.0, uniform=True).cpu_left_s is None

@@ -10,6 +10,11 @@ the fit key (:func:`~parknss.experiments.store.fit_key`) of a study job, or
 gives the job's name and its total steps (paper recipe: epochs; fast recipe: updates +
 finish epochs). A folder the plan does not know keeps its folder name and no total; a
 state file that does not read is listed as unreadable, with why.
+
+CPU time left: a paper-recipe step (one full-batch epoch) costs the same throughout, so a
+fit at step k of K after c CPU s has about c·(K − k)/k left; a fast-recipe fit's two
+phases cost differently per step (an update ~1/6 of an epoch), so it gets none
+(``parknss study estimate`` prices a whole fit).
 """
 
 from __future__ import annotations
@@ -31,7 +36,8 @@ from parknss.nss.train_state import FORMAT, META
 class FitProgress:
     """One fit's training state: ``step`` of ``steps`` (None: the plan does not know the
     fit), CPU and wall seconds so far, the best smoothed criterion and its step, when the
-    state was last written (UTC), or ``error`` when the state does not read."""
+    state was last written (UTC), or ``error`` when the state does not read; ``uniform``:
+    every step costs the same (the paper recipe), so :attr:`cpu_left_s` extrapolates."""
 
     folder: str
     name: str
@@ -43,13 +49,23 @@ class FitProgress:
     best_step: int | None = None
     updated_utc: str = ""
     error: str = ""
+    uniform: bool = False
 
     @property
     def done(self) -> bool:
         return self.steps is not None and self.step >= self.steps
 
+    @property
+    def cpu_left_s(self) -> float | None:
+        """CPU s to the last step at the mean cost per step so far (module doc); None
+        when the plan does not know the fit, its steps cost unequally or none ran."""
+        if (self.error or not self.uniform or self.steps is None or self.cpu_s is None
+                or self.step <= 0):
+            return None
+        return self.cpu_s * max(self.steps - self.step, 0) / self.step
+
     def to_json(self) -> dict:
-        return {**asdict(self), "done": self.done}
+        return {**asdict(self), "done": self.done, "cpu_left_s": self.cpu_left_s}
 
     def line(self) -> str:
         if self.error:
@@ -57,17 +73,20 @@ class FitProgress:
         of = f"{self.step}/{self.steps} ({100 * self.step / self.steps:.0f} %)" if (
             self.steps) else f"{self.step}/?"
         cpu = "-" if self.cpu_s is None else f"{self.cpu_s:.0f}"
+        left = "-" if self.cpu_left_s is None else f"{self.cpu_left_s:.0f}"
         best = "-" if self.best is None else f"{self.best:.4g} @ {self.best_step}"
-        return f"{self.name:<40} {of:>18} {cpu:>9} {best:>18}  {self.updated_utc}"
+        return f"{self.name:<40} {of:>18} {cpu:>9} {left:>10} {best:>18}  {self.updated_utc}"
 
 
-HEADER = f"{'fit':<40} {'step':>18} {'CPU s':>9} {'best criterion':>18}  written (UTC)"
+HEADER = (f"{'fit':<40} {'step':>18} {'CPU s':>9} {'CPU s left':>10} {'best criterion':>18}"
+          "  written (UTC)")
 
 
-def read_state(folder: Path, name: str, steps: int | None) -> FitProgress:
+def read_state(folder: Path, name: str, steps: int | None, uniform: bool = False
+               ) -> FitProgress:
     """The progress in one state folder (see the module doc)."""
     path = folder / META
-    row = FitProgress(folder.name, name, steps=steps)
+    row = FitProgress(folder.name, name, steps=steps, uniform=uniform)
     try:
         meta = json.loads(path.read_text())
         if meta.get("format") != FORMAT:
@@ -87,20 +106,23 @@ def read_state(folder: Path, name: str, steps: int | None) -> FitProgress:
     return row
 
 
-def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> dict[str, tuple[str, int]]:
-    """State folder name -> (job name, total steps) of every fit the studies plan."""
+def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep
+                 ) -> dict[str, tuple[str, int, bool]]:
+    """State folder name -> (job name, total steps, paper recipe) of every fit the
+    studies plan."""
     from parknss.experiments.cv import MODEL_VARIANTS, cv_jobs, state_folder
     from parknss.experiments.plan import fit_shape, plan_rows
     from parknss.experiments.store import fit_key
 
     campaign = sweep.campaign()
-    out: dict[str, tuple[str, int]] = {}
+    out: dict[str, tuple[str, int, bool]] = {}
     for jobs in plan_rows(cfg, quick, sweep).values():
         for job in jobs:
             key = fit_key(job.fn, job.kwargs)
             if key not in out and job.kwargs.get("model", "nss") == "nss":
                 shape = fit_shape(job, campaign)
-                out[key] = (job.name or key, shape.epochs + shape.updates)
+                out[key] = (job.name or key, shape.epochs + shape.updates,
+                            shape.recipe == "paper")
     ov = cfg.budget(quick).deployment_overrides()
     for var, job in cv_jobs(sweep.data, None, ov, list(MODEL_VARIANTS)):
         if job.kwargs["model"] == "nss":
@@ -118,6 +140,6 @@ def run_progress(out_dir: Path, cfg: ExperimentsConfig, quick: bool,
     names = planned_fits(cfg, quick, Sweep(data=data, progress=False))
     rows = []
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        name, steps = names.get(folder.name, (folder.name, None))
-        rows.append(read_state(folder, name, steps))
+        name, steps, uniform = names.get(folder.name, (folder.name, None, False))
+        rows.append(read_state(folder, name, steps, uniform))
     return rows
