@@ -380,3 +380,18 @@ def test_cpu_left_extrapolates_only_a_fit_whose_steps_cost_the_same():
     assert FitProgress("f", "fast", step=50, steps=200, cpu_s=100.0).cpu_left_s is None
     assert FitProgress("f", "?", step=50, cpu_s=100.0, uniform=True).cpu_left_s is None
     assert FitProgress("f", "new", step=0, steps=200, cpu_s=0.0, uniform=True).cpu_left_s is None
+
+
+def test_the_listing_gives_a_resumed_fit_its_whole_cpu_time(tmp_path):
+    from parknss.experiments.store import fit_cpu_s, listing
+
+    store = _store(tmp_path)
+    fold = {"index": 0, "cpu_s": 3696.5}  # the fit's total, resumptions included
+    store.put(Job(PROBE, {"seed": 1, "steps": 20}), {"fold": fold}, 2579.3, 1504.0)
+    store.put(_job(2), {"seed": 2, "cpu_s": 12.0}, 13.0, 12.0)  # not resumed: one number
+    rows, bad = listing(tmp_path)
+    assert not bad and len(rows) == 2
+    assert any("cpu 1504.0 s (fit 3696 s)" in r for r in rows)
+    assert any("cpu 12.0 s  " in r and "(fit" not in r for r in rows)
+    assert fit_cpu_s({"cpu_s": 5}) == 5.0 and fit_cpu_s({"a": 1}) is None
+    assert fit_cpu_s([1, 2]) is None and fit_cpu_s({"fold": {"cpu_s": None}}) is None

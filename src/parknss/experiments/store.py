@@ -207,7 +207,9 @@ class Machine:
 
 @dataclass
 class Provenance:
-    """Where and how a stored result was computed."""
+    """Where and how a stored result was computed. ``wall_s``/``cpu_s``: the run of the
+    job that stored it; a fit resumed from its training state counts from its resumption
+    (the fit's own total is in its result, :func:`fit_cpu_s`)."""
 
     git_revision: str
     dirty: bool
@@ -419,6 +421,16 @@ def results_root(option: str | Path | None, config: Path | None = None) -> Path:
     return root
 
 
+def fit_cpu_s(result: Any) -> float | None:
+    """The training CPU s a fold or limiter result records for its whole fit (every
+    resumption included: the training state carries it), or None."""
+    if not isinstance(result, dict):
+        return None
+    inner = result.get("fold") if isinstance(result.get("fold"), dict) else result
+    cpu = inner.get("cpu_s")
+    return float(cpu) if isinstance(cpu, int | float) else None
+
+
 def listing(root: Path) -> tuple[list[str], list[str]]:
     """(one line per valid entry, one line per invalid file) of the store at ``root``;
     an entry of another code version than this checkout's is marked ``stale``."""
@@ -430,8 +442,10 @@ def listing(root: Path) -> tuple[list[str], list[str]]:
             continue
         pv = e.provenance
         state = "current" if e.code_version == current else "stale"
+        total = fit_cpu_s(e.result)
+        fit = f" (fit {total:.0f} s)" if total is not None and total > pv.cpu_s + 1 else ""
         rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
                     f"code {e.code_version} {state:7s}  {pv.git_revision[:10]}"
                     f"{'+dirty' if pv.dirty else ''}  wall {pv.wall_s:.1f} s cpu {pv.cpu_s:.1f} s"
-                    f"  {pv.finished_utc}")
+                    f"{fit}  {pv.finished_utc}")
     return rows, bad
