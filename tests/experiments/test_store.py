@@ -383,15 +383,18 @@ def test_cpu_left_extrapolates_only_a_fit_whose_steps_cost_the_same():
 
 
 def test_the_listing_gives_a_resumed_fit_its_whole_cpu_time(tmp_path):
+    from parknss.experiments.jobs import LIMITER_JOB
     from parknss.experiments.store import fit_cpu_s, listing
 
     store = _store(tmp_path)
-    fold = {"index": 0, "cpu_s": 3696.5}  # the fit's total, resumptions included
-    store.put(Job(PROBE, {"seed": 1, "steps": 20}), {"fold": fold}, 2579.3, 1504.0)
+    # a fit resumed from its training state: its result holds the whole fit's CPU time
+    store.put(_job(1), {"seed": 1, "cpu_s": 3696.5}, 2579.3, 1504.0)
     store.put(_job(2), {"seed": 2, "cpu_s": 12.0}, 13.0, 12.0)  # not resumed: one number
     rows, bad = listing(tmp_path)
     assert not bad and len(rows) == 2
     assert any("cpu 1504.0 s (fit 3696 s)" in r for r in rows)
     assert any("cpu 12.0 s  " in r and "(fit" not in r for r in rows)
-    assert fit_cpu_s({"cpu_s": 5}) == 5.0 and fit_cpu_s({"a": 1}) is None
-    assert fit_cpu_s([1, 2]) is None and fit_cpu_s({"fold": {"cpu_s": None}}) is None
+    # a limiter result carries its fit as the fold result it answers (ALIASES)
+    assert fit_cpu_s(LIMITER_JOB, {"fold": {"cpu_s": 3696.5}, "cpu_s": 1.0}) == 3696.5
+    assert fit_cpu_s(FOLD_JOB, {"cpu_s": 5}) == 5.0 and fit_cpu_s(FOLD_JOB, {"a": 1}) is None
+    assert fit_cpu_s(FOLD_JOB, [1, 2]) is None and fit_cpu_s(LIMITER_JOB, {"fold": None}) is None

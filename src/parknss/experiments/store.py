@@ -421,14 +421,15 @@ def results_root(option: str | Path | None, config: Path | None = None) -> Path:
     return root
 
 
-def fit_cpu_s(result: Any) -> float | None:
-    """The training CPU s a fold or limiter result records for its whole fit (every
-    resumption included: the training state carries it), or None."""
-    if not isinstance(result, dict):
-        return None
-    inner = result.get("fold") if isinstance(result.get("fold"), dict) else result
-    cpu = inner.get("cpu_s")
-    return float(cpu) if isinstance(cpu, int | float) else None
+def fit_cpu_s(fn: str, result: Any) -> float | None:
+    """The training CPU s the result of job ``fn`` records for its whole fit (every
+    resumption included: the training state carries it): its own ``cpu_s``, or that of
+    its part that answers another job (:data:`ALIASES`: a limiter result's fold); None
+    when it records none."""
+    parts = [part for answering, part in ALIASES.values() if answering == fn]
+    inner = result.get(parts[0]) if parts and isinstance(result, dict) else result
+    cpu = inner.get("cpu_s") if isinstance(inner, dict) else None
+    return float(cpu) if isinstance(cpu, int | float) and not isinstance(cpu, bool) else None
 
 
 def listing(root: Path) -> tuple[list[str], list[str]]:
@@ -442,7 +443,7 @@ def listing(root: Path) -> tuple[list[str], list[str]]:
             continue
         pv = e.provenance
         state = "current" if e.code_version == current else "stale"
-        total = fit_cpu_s(e.result)
+        total = fit_cpu_s(e.fn, e.result)
         fit = f" (fit {total:.0f} s)" if total is not None and total > pv.cpu_s + 1 else ""
         rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
                     f"code {e.code_version} {state:7s}  {pv.git_revision[:10]}"
