@@ -24,6 +24,7 @@ import math
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import NamedTuple
 
 from parknss.errors import ConfigError
 from parknss.experiments.config import ExperimentsConfig
@@ -82,11 +83,19 @@ HEADER = (f"{'fit':<40} {'step':>18} {'CPU s':>9} {'CPU s left':>10} {'best crit
           "  written (UTC)")
 
 
-def read_state(folder: Path, name: str, steps: int | None, uniform: bool = False
-               ) -> FitProgress:
+class PlannedFit(NamedTuple):
+    """A fit of the plan: its job's name, its total steps, whether every step costs the
+    same (the paper recipe)."""
+
+    name: str
+    steps: int | None
+    uniform: bool = False
+
+
+def read_state(folder: Path, plan: PlannedFit) -> FitProgress:
     """The progress in one state folder (see the module doc)."""
     path = folder / META
-    row = FitProgress(folder.name, name, steps=steps, uniform=uniform)
+    row = FitProgress(folder.name, plan.name, steps=plan.steps, uniform=plan.uniform)
     try:
         meta = json.loads(path.read_text())
         if meta.get("format") != FORMAT:
@@ -106,23 +115,21 @@ def read_state(folder: Path, name: str, steps: int | None, uniform: bool = False
     return row
 
 
-def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep
-                 ) -> dict[str, tuple[str, int, bool]]:
-    """State folder name -> (job name, total steps, paper recipe) of every fit the
-    studies plan."""
+def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> dict[str, PlannedFit]:
+    """State folder name -> :class:`PlannedFit` of every fit the studies plan."""
     from parknss.experiments.cv import MODEL_VARIANTS, cv_jobs, state_folder
     from parknss.experiments.plan import fit_shape, plan_rows
     from parknss.experiments.store import fit_key
 
     campaign = sweep.campaign()
-    out: dict[str, tuple[str, int, bool]] = {}
+    out: dict[str, PlannedFit] = {}
     for jobs in plan_rows(cfg, quick, sweep).values():
         for job in jobs:
             key = fit_key(job.fn, job.kwargs)
             if key not in out and job.kwargs.get("model", "nss") == "nss":
                 shape = fit_shape(job, campaign)
-                out[key] = (job.name or key, shape.epochs + shape.updates,
-                            shape.recipe == "paper")
+                out[key] = PlannedFit(job.name or key, shape.epochs + shape.updates,
+                                      shape.recipe == "paper")
     ov = cfg.budget(quick).deployment_overrides()
     for var, job in cv_jobs(sweep.data, None, ov, list(MODEL_VARIANTS)):
         if job.kwargs["model"] == "nss":
@@ -140,6 +147,5 @@ def run_progress(out_dir: Path, cfg: ExperimentsConfig, quick: bool,
     names = planned_fits(cfg, quick, Sweep(data=data, progress=False))
     rows = []
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        name, steps, uniform = names.get(folder.name, (folder.name, None, False))
-        rows.append(read_state(folder, name, steps, uniform))
+        rows.append(read_state(folder, names.get(folder.name, PlannedFit(folder.name, None))))
     return rows
