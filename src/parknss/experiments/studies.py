@@ -238,18 +238,15 @@ def estimate(
 def run_progress_of(out: Path) -> list:
     """:func:`~parknss.experiments.progress.run_progress` of a run folder, at the budget,
     studies config and campaign its manifest (``run.json``) records."""
-    import json
-
     from parknss.errors import ConfigError
     from parknss.experiments.config import load_experiments_config
     from parknss.experiments.progress import run_progress
+    from parknss.outputs import RUN_MANIFEST, read_manifest
 
-    manifest = Path(out) / "run.json"
-    try:
-        args = json.loads(manifest.read_text())["args"]
-    except (OSError, ValueError, KeyError) as exc:
-        raise ConfigError(f"{manifest}: not a run folder manifest ({exc.__class__.__name__})") \
-            from exc
+    args = (read_manifest(out) or {}).get("args")
+    if not isinstance(args, dict):
+        raise ConfigError(f"{Path(out) / RUN_MANIFEST}: not a run folder manifest (missing, "
+                          "unreadable or without the run's arguments)")
     cfg = load_experiments_config(args.get("config"))
     data = args.get("data")
     return run_progress(Path(out), cfg, bool(args.get("quick")), str(data) if data else None)
