@@ -33,6 +33,7 @@ from parknss.errors import ConfigError
 from parknss.executor import Job, Store, Tally, run_jobs
 from parknss.experiments.config import merge_overrides
 from parknss.experiments.folds import fold_config
+from parknss.experiments.jobs import FOLD_JOB
 from parknss.nss.campaigns import load_campaign
 from parknss.nss.checkpoint import load_model
 from parknss.nss.predict import predict_trials
@@ -131,7 +132,8 @@ class CVResult:
 
 
 def state_folder(variant: str, index: int) -> str:
-    """The name of the training-state folder of a Table II fit (under ``OUT/state``)."""
+    """The folder name of a Table II fit: its saved model under the run's models folder,
+    its training state under ``OUT/state``."""
     return f"{variant}_fold{index}"
 
 
@@ -157,10 +159,10 @@ def cv_jobs(
                 "overrides": merge_overrides(overrides, extra) if model == "nss" else {},
             }
             if save_dir is not None and model == "nss":
-                kw["save_dir"] = str(save_dir / f"{var}_fold{i}")
+                kw["save_dir"] = str(save_dir / state_folder(var, i))
                 # the fit's resumable state: a killed run resumes mid-fold, not from epoch 0
                 kw["state_dir"] = str(save_dir.parent / "state" / state_folder(var, i))
-            jobs.append((var, Job("parknss.experiments.folds:fold_job", kw, f"{var} fold {i}")))
+            jobs.append((var, Job(FOLD_JOB, kw, f"{var} fold {i}")))
     return jobs
 
 
