@@ -160,3 +160,16 @@ def test_estimate_counts_a_limiter_fit_and_the_fold_fits_it_answers_once(tiny, t
     fold = next(j for j in study_jobs("learning-curve", cfg, False, sweep)
                 if j.kwargs["split"] == "cv")
     assert store.get(fold) == (False, None)  # the stubs have no "fold" part
+
+
+def test_the_shipped_schedule_axis_runs_at_a_reduced_lr_its_cosine_row_a_loss_fit(tiny):
+    """The paper isolates the schedule shape at a reduced LR: the shipped axis's cosine
+    option is then the loss sweep's MAE fit at that LR, one fit for both rows."""
+    data, _ = tiny
+    cfg = load_experiments_config()
+    sched = next(a for a in cfg.axes if a.name == "lr schedule")
+    lrs = {o.overrides["train"]["lr"] for o in sched.options}
+    assert len(lrs) == 1 and lrs.pop() < 0.002  # below the deployed LR, the same for both
+    rows = plan_rows(cfg, False, Sweep(data=data, progress=False), ("ablations",))
+    schedule, loss = _ids(rows["ablations: lr schedule"]), _ids(rows["ablations: loss"])
+    assert len(schedule & loss) == len(cfg.budget(False).ablation_folds)  # the cosine row
