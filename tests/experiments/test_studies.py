@@ -89,6 +89,28 @@ def test_ablations_share_the_baseline_and_sweep_lr(tiny):
     assert longest.windows[0] > next(o for o in win.options if o.deployed).windows[0]
 
 
+def test_an_axis_run_alone_is_the_same_fits_as_in_the_whole_study(tiny, tmp_path, capsys):
+    from parknss.cli import main
+    from parknss.errors import ConfigError
+
+    data, cfg = tiny
+    sweep = _sweep(data)
+    yaw = cfg.with_axes(["yaw readout"])
+    assert [a.name for a in yaw.axes] == ["yaw readout"] and cfg.axis("loss") is not None
+    alone = {j.key() for j in ablation_jobs(yaw, False, sweep)}
+    assert len(alone) == 2 * len(cfg.full.ablation_folds)  # baseline + direct yaw
+    assert alone < {j.key() for j in ablation_jobs(cfg, False, sweep)}
+    assert [a.name for a in cfg.with_axes(["yaw readout", "loss"]).axes] == ["loss",
+                                                                            "yaw readout"]
+    with pytest.raises(ConfigError, match=r"no ablation axis 'Loss'.*'loss', 'training window'"):
+        cfg.with_axes(["Loss"])
+    out = str(tmp_path / "s")
+    assert main(["study", "limiter", "--axes", "loss", "--out", out, "--data", data]) == 2
+    assert "the ablations study, not 'limiter'" in capsys.readouterr().err
+    assert main(["study", "ablations", "--axes", " , ", "--out", out, "--data", data]) == 2
+    assert "name at least one axis" in capsys.readouterr().err
+
+
 def test_limiter_variants_share_one_model(tiny):
     data, cfg = tiny
     floor = NoiseFloor(0.02, 0.035, 5, "measured")

@@ -61,13 +61,22 @@ def register(app: typer.Typer) -> None:
             as_json: bool = json_opt,
             store: str | None = store_opt,
             refit: bool = refit_opt,
+            axes: str | None = typer.Option(
+                None, "--axes", hidden=name != "ablations",
+                help="Only these Table III axes, comma-separated, e.g. 'lr schedule,yaw "
+                "readout' (default: every axis of the config).",
+            ),
         ) -> None:
             from parknss.experiments.studies import StudyInputs, run_study, study_text
 
+            picked = tuple(a.strip() for a in (axes or "").split(",") if a.strip())
+            if axes is not None and not picked:
+                raise typer.BadParameter("name at least one axis", param_hint="--axes")
             folder = out or Path("runs") / f"study-{name}{'-quick' if quick else ''}"
             inputs = StudyInputs(name=name, out=folder, quick=quick, executor=executor,
                                  workers=workers, address=address, data=data, config=config,
-                                 floor=floor, overwrite=overwrite, store=store, refit=refit)
+                                 floor=floor, overwrite=overwrite, store=store, refit=refit,
+                                 axes=picked)
             run = run_study(inputs, _log)
             if as_json:
                 typer.echo(json.dumps(run.doc, indent=2, default=str))

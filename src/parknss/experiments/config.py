@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import Field, field_validator
 
 from parknss.config import StrictModel, load_config
+from parknss.errors import ConfigError
 
 Overrides = dict[str, dict[str, Any]]
 
@@ -169,6 +171,17 @@ class ExperimentsConfig(StrictModel):
 
     def axis(self, name: str) -> AblationAxis | None:
         return next((a for a in self.axes if a.name == name), None)
+
+    def with_axes(self, names: Sequence[str]) -> ExperimentsConfig:
+        """This config with only the Table III axes ``names``, in the config's order (so a
+        study can be run axis by axis, e.g. across sittings); an unknown name is an error
+        that lists the config's axes."""
+        known = [a.name for a in self.axes]
+        unknown = [n for n in names if n not in known]
+        if unknown or not names:
+            raise ConfigError(f"no ablation axis {', '.join(map(repr, unknown)) or 'named'}; "
+                              f"the config's axes: {', '.join(map(repr, known))}")
+        return self.model_copy(update={"axes": [a for a in self.axes if a.name in names]})
 
 
 def load_experiments_config(path: str | Path | None = None) -> ExperimentsConfig:

@@ -79,7 +79,8 @@ class StudyInputs:
     ``out`` (and cache), the executor settings, the campaign ``data`` (None: default), the
     experiments YAML ``config`` (None: shipped), the noise ``floor`` spec, whether an
     ``out`` holding something else may be replaced (``overwrite``), the result ``store``
-    (a folder or "off"; None: $PARKNSS_RESULTS, else the config's) and ``refit``."""
+    (a folder or "off"; None: $PARKNSS_RESULTS, else the config's), ``refit`` and, for
+    the ablations, the Table III ``axes`` to run (empty: every axis of the config)."""
 
     name: str
     out: Path
@@ -94,6 +95,7 @@ class StudyInputs:
     overwrite: bool = False
     store: str | None = None
     refit: bool = False
+    axes: tuple[str, ...] = ()
 
     def identity(self, cfg) -> dict:
         """What decides the results (the run folder's manifest; not the study, so the
@@ -104,7 +106,8 @@ class StudyInputs:
         floor = Path(self.floor) if self.floor not in ("measure", "paper") else self.floor
         return {"quick": self.quick, "data": self.data, "config": self.config,
                 "floor": floor, "experiments_config": cfg.digest(),
-                "nss_config": fold_config(None, None).digest()}
+                "nss_config": fold_config(None, None).digest(),
+                **({"axes": list(self.axes)} if self.axes else {})}
 
 
 @dataclass
@@ -130,6 +133,10 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
     if name not in STUDIES:
         raise ConfigError(f"unknown study {name!r}; one of {', '.join(STUDIES)}")
     cfg = load_experiments_config(inputs.config)
+    if inputs.axes:
+        if name != "ablations":
+            raise ConfigError(f"axes select Table III axes: the ablations study, not {name!r}")
+        cfg = cfg.with_axes(inputs.axes)
     stratified, note = fold_note(name, checked_campaign(data, f"parknss study {name}"), cfg)
     if inputs.progress:
         log(note)
