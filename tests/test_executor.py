@@ -60,7 +60,7 @@ def test_a_store_behind_the_cache(tmp_path):
         fit_missing = True
 
         def __init__(self):
-            self.docs, self.times = {}, {}
+            self.docs, self.times, self.resumed = {}, {}, []
 
         def get(self, job):
             return (job.key() in self.docs), self.docs.get(job.key())
@@ -68,16 +68,21 @@ def test_a_store_behind_the_cache(tmp_path):
         def put(self, job, result, wall_s, cpu_s):
             self.docs[job.key()], self.times[job.key()] = result, (wall_s, cpu_s)
 
+        def resume(self, job):
+            self.resumed.append(job.key())
+
     store, jobs = DictStore(), _jobs(2)
     tally = Tally()
     first = run_jobs(jobs, workers=1, cache_dir=tmp_path / "a", progress=False, store=store,
                      tally=tally)
     assert tally.to_json() == {"cache": 0, "store": 0, "computed": 2}
+    assert store.resumed == [j.key() for j in jobs]  # each computed job, before it ran
     assert all(w >= 0 and c >= 0 for w, c in store.times.values())
     assert ResultCache(tmp_path / "a").get(jobs[0])[0]  # computed: in the cache and the store
     again = run_jobs(jobs, workers=1, cache_dir=tmp_path / "b", progress=False, store=store,
                      tally=tally)
     assert again == first and tally.to_json() == {"cache": 0, "store": 2, "computed": 2}
+    assert len(store.resumed) == 2  # stored jobs are not resumed
     assert not ResultCache(tmp_path / "b").get(jobs[0])[0]  # a stored result is not copied
     store.fit_missing = False  # --stored-only: what the store lacks is an error, not a fit
     assert run_jobs(jobs, workers=1, progress=False, store=store) == first
@@ -102,6 +107,9 @@ def test_pool_stores_each_result_as_soon_as_it_finishes():
 
         def put(self, job, result, wall_s, cpu_s):
             self.order.append(job.kwargs["seed"])
+
+        def resume(self, job):
+            pass
 
     jobs = [Job(PROBE, {"seed": 0, "steps": 5000}), *(
         Job(PROBE, {"seed": s, "steps": 20}) for s in (1, 2, 3))]  # fmt: skip

@@ -90,6 +90,10 @@ class Store(Protocol):
 
     def put(self, job: Job, result: Any, wall_s: float, cpu_s: float) -> None: ...
 
+    def resume(self, job: Job) -> None:
+        """Called for each job about to be computed, before any runs: a store may
+        prepare it (seed its resumable state from one an earlier sitting parked)."""
+
 
 @dataclass
 class Tally:
@@ -180,6 +184,8 @@ def run_jobs(
             todo.append(i)
     if todo and store is not None and not store.fit_missing:
         raise MissingResultsError(desc, [jobs[i].name or jobs[i].fn for i in todo], len(jobs))
+    for i in todo if store is not None else ():
+        store.resume(jobs[i])
     bar = tqdm(
         total=len(jobs),
         initial=len(jobs) - len(todo),

@@ -189,7 +189,7 @@ def test_a_study_runs_again_from_the_store(tmp_path, tiny_study, capsys):
     assert refit["sources"] == {"run_cache": 0, "store": 0, "fitted": n}
     assert len(list((store / "fold_job").glob("*.json"))) == n  # overwritten, not added
     assert main(["results", "verify", "--store", str(store)]) == 0
-    assert f"{n} fits in {store}: all valid" in capsys.readouterr().out
+    assert f"{n} fits and 0 parked states in {store}: all valid" in capsys.readouterr().out
     assert main(["results", "list", "--store", str(store), "--json"]) == 0
     listed = json.loads(capsys.readouterr().out)
     assert len(listed["entries"]) == n and all(" current " in e for e in listed["entries"])

@@ -1,7 +1,9 @@
-"""``parknss results list|verify``: what the result store holds
+"""``parknss results list|verify|park``: what the result store holds
 (:mod:`parknss.experiments.store`; ``--store DIR``, else $PARKNSS_RESULTS, else the
 checkout's ``results/``). ``verify`` checks that every file parses and matches its key,
-and exits non-zero, naming the first bad file, when one does not."""
+and exits non-zero, naming the first bad file, when one does not; ``park OUT`` copies the
+training states of a run folder's unfinished fits into the store
+(:mod:`parknss.experiments.parked`)."""
 
 from __future__ import annotations
 
@@ -14,7 +16,8 @@ from parknss.errors import ParknssError
 
 
 def register(app: typer.Typer) -> None:
-    results_app = typer.Typer(help="The result store: list and verify stored fits.",
+    results_app = typer.Typer(help="The result store: list and verify stored fits, park "
+                              "unfinished ones.",
                               no_args_is_help=True)
     app.add_typer(results_app, name="results")
     store_opt = typer.Option(None, "--store", help="Result store folder (default: results/).")
@@ -27,30 +30,58 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print one JSON document."),
     ) -> None:
         """One line per stored fit: key, name, data hash, code version, revision, times."""
+        from parknss.experiments import parked
         from parknss.experiments.store import code_version, listing, results_root
 
         root = results_root(store, config)
         rows, bad = listing(root)
+        held, bad_held = parked.listing(root)
+        bad += bad_held
         if as_json:
             doc = {"store": str(root), "code_version": code_version(), "entries": rows,
-                   "invalid": bad}
+                   "parked": held, "invalid": bad}
             typer.echo(json.dumps(doc, indent=2))
             return
-        for line in rows + [f"INVALID {b}" for b in bad]:
+        for line in rows + held + [f"INVALID {b}" for b in bad]:
             typer.echo(line)
-        typer.echo(f"{len(rows)} fits in {root} (code version here: {code_version()})"
+        typer.echo(f"{len(rows)} fits in {root}, {len(held)} unfinished parked (code version "
+                   f"here: {code_version()})"
                    + (f"; {len(bad)} invalid files (parknss results verify)" if bad else ""))
 
     @results_app.command("verify")
     def verify_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:
-        """Check every stored file: it parses and its key matches its contents and path."""
+        """Check every stored file: it parses and its key matches its contents and path;
+        every parked state reads whole and sits under its own key."""
+        from parknss.experiments import parked
         from parknss.experiments.store import listing, results_root
 
         root = results_root(store, config)
         rows, bad = listing(root)
+        held, bad_held = parked.listing(root)
+        bad += bad_held
         for b in bad:
             typer.echo(f"INVALID {b}")
         if bad:
-            raise ParknssError(f"{len(bad)} of {len(rows) + len(bad)} files in {root} are not "
-                               f"valid store entries, first: {bad[0]}")
-        typer.echo(f"{len(rows)} fits in {root}: all valid")
+            raise ParknssError(f"{len(bad)} of {len(rows) + len(held) + len(bad)} files in "
+                               f"{root} are not valid store entries or parked states, first: "
+                               f"{bad[0]}")
+        typer.echo(f"{len(rows)} fits and {len(held)} parked states in {root}: all valid")
+
+    @results_app.command("park")
+    def park_cmd(
+        out: Path = typer.Argument(..., help="A parknss reproduce or study run folder."),
+        store: str | None = store_opt,
+        config: Path | None = config_opt,
+    ) -> None:
+        """Copy the training state of each unfinished fit of run folder OUT into the store
+        (inflight/<key>/), so a later sitting resumes it; commit it with the store."""
+        from parknss.experiments.parked import park_run
+        from parknss.experiments.store import results_root
+
+        root = results_root(store, config)
+        outcomes = park_run(out, root)
+        for o in outcomes:
+            typer.echo(o.line())
+        n = sum(o.parked is not None for o in outcomes)
+        typer.echo(f"{n} of {len(outcomes)} state folders parked in {root}")
+

@@ -354,6 +354,26 @@ class ResultStore:
         tmp = p.with_suffix(f".{os.getpid()}.tmp")  # two runs may store the same fit
         tmp.write_text(json.dumps(entry.to_json(), indent=1, sort_keys=True) + "\n")
         tmp.replace(p)
+        from parknss.experiments import parked
+
+        if parked.unpark(self.root, key):
+            self.log(f"{job.name or key}: stored; its parked state is removed")
+
+    def resume(self, job: Job) -> None:
+        """Before ``job`` is computed: label its state folder (if it has one) with the job
+        and its key, and seed it from the state parked under that key when that is further
+        along (:mod:`parknss.experiments.parked`; not under ``refit``)."""
+        state_dir = job.kwargs.get("state_dir")
+        if state_dir is None:
+            return
+        from parknss.experiments import parked
+
+        key = self.entry_key(job)[0]
+        parked.label(state_dir, job.fn, job.kwargs, job.name, key)
+        info = parked.seed(self.root, key, state_dir) if self.read else None
+        if info is not None:
+            cpu = "" if info.cpu_s is None else f", {info.cpu_s:.0f} CPU s"
+            self.log(f"{job.name or key}: resumes from its parked state (step {info.step}{cpu})")
 
 
 def store_dir(option: str | Path | None, setting: str = AUTO,
