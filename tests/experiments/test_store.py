@@ -367,6 +367,14 @@ def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_st
     (tmp_path / "a" / "state" / rows[0].folder / "train_state.json").write_text("{")
     bad = next(r for r in run_progress_of(tmp_path / "a") if r.folder == rows[0].folder)
     assert bad.error.startswith("JSONDecodeError") and not bad.done
+    queued = tmp_path / "a" / "state" / rows[1].folder
+    (queued / "train_state.json").unlink()  # labelled by the executor, not yet started
+    (queued / "job.json").write_text("{}")
+    q = next(r for r in run_progress_of(tmp_path / "a") if r.folder == rows[1].folder)
+    assert q.queued and not q.error and not q.done and q.cpu_left_s is None
+    assert main(["study", "progress", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert "not started" in out and "2 fits with a training state, 1 done, 1 queued" in out
     with pytest.raises(ConfigError, match="not a run folder manifest"):
         run_progress_of(tmp_path / "nowhere")
 

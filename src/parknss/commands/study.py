@@ -106,7 +106,9 @@ def register(app: typer.Typer) -> None:
         for r in rows:
             typer.echo(r.line())
         done = sum(r.done for r in rows)
-        typer.echo(f"{len(rows)} fits with a training state, {done} done")
+        queued = sum(r.queued for r in rows)
+        typer.echo(f"{len(rows) - queued} fits with a training state, {done} done"
+                   + (f", {queued} queued" if queued else ""))
 
     @study_app.command("estimate")
     def estimate_cmd(

@@ -9,7 +9,9 @@ the fit key (:func:`~parknss.experiments.store.fit_key`) of a study job, or
 (:func:`~parknss.experiments.plan.plan_rows` at the run's budget, config and campaign)
 gives the job's name and its total steps (paper recipe: epochs; fast recipe: updates +
 finish epochs). A folder the plan does not know keeps its folder name and no total; a
-state file that does not read is listed as unreadable, with why.
+folder with no state file yet (the executor labels a job's folder with ``job.json`` when
+it queues the job, :mod:`parknss.experiments.parked`) is listed as queued; a state file
+that does not read is listed as unreadable, with why.
 
 CPU time left: a paper-recipe step (one full-batch epoch) costs the same throughout, so a
 fit at step k of K after c CPU s has about c·(K − k)/k left; a fast-recipe fit's two
@@ -28,6 +30,7 @@ from typing import NamedTuple
 
 from parknss.errors import ConfigError
 from parknss.experiments.config import ExperimentsConfig
+from parknss.experiments.parked import JOB_FILE
 from parknss.experiments.sweep import Sweep
 from parknss.nss.history import History
 from parknss.nss.train_state import FORMAT, META
@@ -37,8 +40,9 @@ from parknss.nss.train_state import FORMAT, META
 class FitProgress:
     """One fit's training state: ``step`` of ``steps`` (None: the plan does not know the
     fit), CPU and wall seconds so far, the best smoothed criterion and its step, when the
-    state was last written (UTC), or ``error`` when the state does not read; ``uniform``:
-    every step costs the same (the paper recipe), so :attr:`cpu_left_s` extrapolates."""
+    state was last written (UTC), or ``error`` when the state does not read; ``queued``:
+    the folder has no state file yet (the fit has not started); ``uniform``: every step
+    costs the same (the paper recipe), so :attr:`cpu_left_s` extrapolates."""
 
     folder: str
     name: str
@@ -51,6 +55,7 @@ class FitProgress:
     updated_utc: str = ""
     error: str = ""
     uniform: bool = False
+    queued: bool = False
 
     @property
     def done(self) -> bool:
@@ -71,6 +76,8 @@ class FitProgress:
     def line(self) -> str:
         if self.error:
             return f"{self.name:<40} unreadable: {self.error}"
+        if self.queued:
+            return f"{self.name:<40} {'queued':>18} (not started: no training state yet)"
         of = f"{self.step}/{self.steps} ({100 * self.step / self.steps:.0f} %)" if (
             self.steps) else f"{self.step}/?"
         cpu = "-" if self.cpu_s is None else f"{self.cpu_s:.0f}"
@@ -96,6 +103,9 @@ def read_state(folder: Path, plan: PlannedFit) -> FitProgress:
     """The progress in one state folder (see the module doc)."""
     path = folder / META
     row = FitProgress(folder.name, plan.name, steps=plan.steps, uniform=plan.uniform)
+    if not path.exists() and (folder / JOB_FILE).is_file():
+        row.queued = True
+        return row
     try:
         meta = json.loads(path.read_text())
         if meta.get("format") != FORMAT:
