@@ -1,7 +1,7 @@
 """Benchmark: the 20 TPCAP parking cases, planned and driven in closed loop.
 
     python benchmarks/bench_tpcap.py [--vehicle configs/tpcap_vehicle.yaml] [--cases 1-20]
-        [--plants kinematic] [--budget S] [--out FILE.json] [--json]
+        [--plants kinematic] [--expansions N] [--budget S] [--out FILE.json] [--json]
 
 Reads the cases in place from ../shared/planning/tpcap (never copied into the
 repository; ``--tpcap`` elsewhere) with :func:`parknss.sim.scene_formats.read_tpcap`
@@ -17,8 +17,9 @@ plant). Two settings:
 
 ``--vehicle`` (default: the TPCAP car, configs/tpcap_vehicle.yaml; ``--vehicle default``:
 parknss's default car, to show the geometry flows) is the car planned and driven.
-``--budget`` overrides the search time budget (planning.yaml: 5 s). Timings are
-wall-clock, one process, one thread (run with OMP_NUM_THREADS=1).
+``--expansions`` overrides the search budget (planning.yaml ``max_expansions``: 1200 node
+expansions, the same on any machine), ``--budget`` the wall-clock guard (``time_budget_s``:
+30 s). Timings are wall-clock, one process, one thread (run with OMP_NUM_THREADS=1).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from pathlib import Path
 from parknss.config import CONFIG_DIR, override
 from parknss.sim.closed_loop import load_closed_loop_config
 from parknss.sim.planner import plan_scene
-from parknss.sim.planning.hybrid_astar import load_planning_config
+from parknss.sim.planning.hybrid_astar import PlanningConfig, load_planning_config
 from parknss.sim.scene_formats import read_tpcap
 from parknss.sim.session import run_cell
 from parknss.vehicle import VehicleGeometry, load_vehicle_geometry
@@ -53,13 +54,11 @@ def _cases(spec: str) -> list[int]:
     return out
 
 
-def run_case(path: Path, geom: VehicleGeometry, setting: dict, plants: list[str], budget):
+def run_case(path: Path, geom: VehicleGeometry, setting: dict, plants: list[str],
+             planning: PlanningConfig):
     """One case under one setting: the plan summary and each plant's outcome."""
     scene = read_tpcap(path)
     loop = override(load_closed_loop_config(), setting, source="bench setting")
-    planning = load_planning_config()
-    if budget is not None:
-        planning = override(planning, {"time_budget_s": budget}, source="--budget")
     plan = plan_scene(scene, loop, planning, geom)
     row = plan.to_json(scene)
     row.pop("trajectory")
@@ -149,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default="1-20")
     ap.add_argument("--plants", default="kinematic")
     ap.add_argument("--settings", default=",".join(SETTINGS))
+    ap.add_argument("--expansions", type=int, default=None)
     ap.add_argument("--budget", type=float, default=None)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--json", action="store_true")
@@ -158,11 +158,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     geom = VehicleGeometry() if a.vehicle == "default" else load_vehicle_geometry(a.vehicle)
     plants = [p for p in a.plants.split(",") if p]
+    budgets = {"max_expansions": a.expansions, "time_budget_s": a.budget}
+    planning = override(load_planning_config(),
+                        {k: v for k, v in budgets.items() if v is not None}, source="options")
     doc: dict = {"vehicle": geom.to_dict(), "settings": {}}
     for name in a.settings.split(","):
         rows = []
         for c in _cases(a.cases):
-            rows.append(run_case(a.tpcap / f"Case{c}.csv", geom, SETTINGS[name], plants, a.budget))
+            rows.append(run_case(a.tpcap / f"Case{c}.csv", geom, SETTINGS[name], plants, planning))
             print(f"[{name}] case {c}: {rows[-1]['reason']}", file=sys.stderr, flush=True)
         doc["settings"][name] = {"rows": rows, "summary": summarize(rows, plants)}
         if not a.json:

@@ -126,8 +126,27 @@ def test_kinematically_impossible_goal_ends_within_the_budget():
     res = planner.plan(scene)
     elapsed = time.perf_counter() - t0
     assert not res.found
-    assert res.reason in ("time budget exhausted", "search space exhausted")
+    assert res.reason in (
+        "time budget exhausted", "expansion budget exhausted", "search space exhausted"
+    )
     assert elapsed < 0.8 + 0.5
+
+
+def test_the_search_budget_is_a_count_of_expansions():
+    """The budget that decides a plan is node expansions, not time: one expansion short
+    of the plan's count ends without it, exactly the count finds the same plan, whatever
+    the wall-clock guard (so a grid plans the same on any machine, under any load)."""
+    scene = grid_scene(3)  # a parallel slot: some tens of expansions
+    full = PLANNER.plan(scene)
+    n = full.stats.expansions
+    assert full.found and n > 5
+    short = HybridAStar(PlanningConfig(max_expansions=n - 1, time_budget_s=30.0), G).plan(scene)
+    assert not short.found and short.reason == "expansion budget exhausted"
+    assert short.stats.expansions == n - 1
+    exact = HybridAStar(PlanningConfig(max_expansions=n, time_budget_s=300.0), G).plan(scene)
+    assert exact.found and exact.stats.expansions == n
+    for a, b in zip(exact.trajectory.segments, full.trajectory.segments, strict=True):
+        np.testing.assert_array_equal(a.poses, b.poses)
 
 
 def test_start_equals_goal_is_an_empty_plan():

@@ -30,6 +30,13 @@ Collisions in the search use :class:`~parknss.sim.planning.collision_field.Field
 plan is accepted only after the exact dense check of :mod:`parknss.sim.geometry` (<= 2 cm
 / 0.5° between poses, exact polygon distances) clears the safety margin. Degenerate
 requests return ``found=False`` with a reason, never an exception.
+
+Budgets: the search stops after ``max_expansions`` node expansions of both trees (a
+count, so a scene plans the same on any machine and under any load: the grids' studies
+are reproducible); ``time_budget_s`` is a wall-clock guard over setup and search for a
+scene whose expansions are pathologically slow. A plan stopped by the guard ("time
+budget exhausted") depends on the machine; one stopped by the count ("expansion budget
+exhausted") does not.
 """
 
 from __future__ import annotations
@@ -61,6 +68,7 @@ REASONS = (
     "goal in collision",
     "start in collision",
     "goal unreachable",
+    "expansion budget exhausted",
     "time budget exhausted",
     "search space exhausted",
 )
@@ -100,7 +108,12 @@ class PlanningConfig(StrictModel):
     start_lead_ins_m: tuple[float, ...] = Field(
         (4.0, 8.0, 12.0), description="straight lead-ins from the start tried before RS, m"
     )
-    time_budget_s: float = Field(5.0, gt=0.0)
+    max_expansions: int = Field(
+        1200, ge=1, description="search budget: node expansions of both trees together"
+    )
+    time_budget_s: float = Field(
+        30.0, gt=0.0, description="wall-clock guard over setup and search, s"
+    )
     dense: DenseCheckConfig = DenseCheckConfig()
     refine: RefineConfig = RefineConfig()
 
@@ -359,6 +372,12 @@ class HybridAStar:
         c = self.cfg
         while any(t.heap for t in trees):
             for i, tree in enumerate(trees):
+                if stats.expansions >= c.max_expansions:
+                    return PlanResult(
+                        False,
+                        "expansion budget exhausted",
+                        detail=f"{stats.expansions} expansions without a connection",
+                    )
                 if time.perf_counter() > deadline:
                     return PlanResult(
                         False,

@@ -69,7 +69,9 @@ class RefineConfig(StrictModel):
     )
     # solver
     max_iter: int = Field(300, ge=1, description="IPOPT iterations per gear segment")
-    cpu_time_s: float = Field(8.0, gt=0.0, description="IPOPT CPU-time budget, whole path, s")
+    cpu_time_s: float = Field(
+        30.0, gt=0.0, description="IPOPT CPU-time guard, whole path, s (max_iter binds)"
+    )
     tol: float = Field(1e-6, gt=0.0, description="IPOPT convergence tolerance")
     mu_strategy: Literal["adaptive", "monotone"] = Field("adaptive", description="IPOPT barrier")
     # output and fallback
