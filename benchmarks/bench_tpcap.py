@@ -19,7 +19,7 @@ plant). Two settings:
 parknss's default car, to show the geometry flows) is the car planned and driven.
 ``--expansions`` overrides the search budget (planning.yaml ``max_expansions``: 1200 node
 expansions, the same on any machine), ``--budget`` the wall-clock guard (``time_budget_s``:
-30 s). Timings are wall-clock, one process, one thread (run with OMP_NUM_THREADS=1).
+60 s). Timings are wall-clock, one process, one thread (run with OMP_NUM_THREADS=1).
 """
 
 from __future__ import annotations

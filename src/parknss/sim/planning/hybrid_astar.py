@@ -112,7 +112,7 @@ class PlanningConfig(StrictModel):
         1200, ge=1, description="search budget: node expansions of both trees together"
     )
     time_budget_s: float = Field(
-        30.0, gt=0.0, description="wall-clock guard over setup and search, s"
+        60.0, gt=0.0, description="wall-clock guard over setup and search, s"
     )
     dense: DenseCheckConfig = DenseCheckConfig()
     refine: RefineConfig = RefineConfig()
