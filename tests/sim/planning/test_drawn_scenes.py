@@ -114,12 +114,7 @@ def test_refined_paths_keep_within_the_steering_lock(cell):
     """Issue 17: the end-pose blend added up to 1.1 % curvature beyond the lock on
     full-lock arcs in the last metre of each gear segment."""
     loop = ClosedLoopConfig()
-    # The property is the curvature, not the time: cell 2's first segment takes ~7 of
-    # the shipped 8 CPU s on a slow core, more with both cores busy (a cache-shared
-    # neighbour inflates process CPU time), so a generous budget keeps the test about
-    # the lock.
-    roomy = override(load_planning_config(), {"refine": {"cpu_time_s": 60.0}}, source="test")
-    plan = plan_scene(grid_scene(cell), loop, roomy)
+    plan = plan_scene(grid_scene(cell), loop)
     assert plan.refined, plan.refine_reason
     g = planning_geometry(GEOM, loop.steer_reserve)
     k_max = math.tan(math.radians(g.steer_lock_deg / g.steer_ratio)) / g.wheelbase
