@@ -119,6 +119,42 @@ def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path
     assert after.total.recipes == {"paper": 8, "fast": 2, "linear": 4}
 
 
+def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):
+    import json
+
+    from parknss.experiments import parked
+    from parknss.nss.train_state import FORMAT, META
+
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    studies = ("convergence",)
+
+    def run():
+        return estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
+                        sec_per_update=0.1, studies=studies)
+
+    before = run()
+    (conv,) = study_jobs("convergence", cfg, False, sweep)
+    shape = fit_shape(conv, load_campaign(data))
+    assert shape.recipe == "paper" and shape.epochs >= 2 and before.total.parked == 0
+
+    def park(step):
+        folder = parked.parked_dir(store.root, store.entry_key(conv)[0])
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / META).write_text(json.dumps({"format": FORMAT, "epoch": step}))
+
+    park(shape.epochs - 1)
+    after = run()
+    assert after.total.parked == 1 and after.total.stored == 0
+    assert after.total.cpu_h == pytest.approx(
+        before.total.cpu_h / shape.epochs)
+    park(10 * shape.epochs)  # a state past the fit's epochs leaves nothing, not less
+    assert run().total.cpu_h == 0.0
+    store.put(conv, {"stub": True}, wall_s=1.0, cpu_s=1.0)  # stored: not counted as parked
+    assert (run().total.parked, run().total.stored) == (0, 1)
+
+
 def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
     from parknss.experiments.plan import time_rates
 

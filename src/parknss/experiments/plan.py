@@ -23,6 +23,12 @@ time, since the wall clock of a shared machine measures the neighbours), and ``s
 by fast fits of 1 and 1 + k phase-1 updates. Capacity variants are costed at the
 deployed net's rate (an upper bound for the smaller nets); the linear baseline is a
 least-squares fit of a few seconds and counted as free.
+
+A paper-recipe fit that the store lacks but holds a parked state of
+(:mod:`parknss.experiments.parked`: ``<store>/inflight/<store key>/``, at epoch e of E)
+costs the epochs it has left, ``(1 - e/E)`` of the fit; a fast-recipe fit's parked
+state is not credited (its phases cost unequally), nor is a state in a run folder that
+was not parked (run folders are scratch).
 """
 
 from __future__ import annotations
@@ -225,10 +231,11 @@ class StudyCost:
     stored: int
     cpu_h: float
     recipes: dict[str, int] = field(default_factory=dict)
+    parked: int = 0
 
     def to_json(self) -> dict:
         return {"study": self.study, "fits": self.fits, "stored": self.stored,
-                "cpu_h_left": self.cpu_h, "recipes": self.recipes}
+                "parked": self.parked, "cpu_h_left": self.cpu_h, "recipes": self.recipes}
 
 
 @dataclass
@@ -254,11 +261,12 @@ class Estimate:
         lines = [
             f"CPU s per paper epoch: {rates}; per fast update: {self.rates.update:.3f}"
             + ("" if self.rates.timed else " (given)"),
-            f"{'study':<28}{'fits':>6}{'stored':>8}{'CPU h left':>12}   recipes",
+            f"{'study':<28}{'fits':>6}{'stored':>8}{'parked':>8}{'CPU h left':>12}   recipes",
         ]
         for s in [*self.studies, self.total]:
             mix = ", ".join(f"{k} {v}" for k, v in sorted(s.recipes.items()))
-            lines.append(f"{s.study:<28}{s.fits:>6}{s.stored:>8}{s.cpu_h:>12.1f}   {mix}")
+            lines.append(f"{s.study:<28}{s.fits:>6}{s.stored:>8}{s.parked:>8}"
+                         f"{s.cpu_h:>12.1f}   {mix}")
         return "\n".join(lines)
 
 
@@ -267,10 +275,12 @@ def estimate(
     log: Callable[[str], None], sec_per_epoch: float | None = None,
     sec_per_update: float | None = None, studies: tuple[str, ...] = PLANNED,
 ) -> Estimate:
-    """Every study's fits at the budget, the store's share and the cost of the rest."""
+    """Every study's fits at the budget, the store's share and the cost of the rest (net
+    of the parked states' progress, module text)."""
     campaign = sweep.campaign()
     shapes: dict[str, FitShape] = {}
     held: dict[str, bool] = {}
+    done: dict[str, float] = {}  # the share of each fit its parked state has done
     rows: dict[str, list[str]] = {}  # the distinct fits of each row, by fit key
     planned = plan_rows(cfg, quick, sweep, studies)
     ids = {_identity(job) for jobs in planned.values() for job in jobs}
@@ -283,6 +293,7 @@ def estimate(
             if key not in shapes:
                 shapes[key] = fit_shape(job, campaign)
                 held[key] = store is not None and store.get(job)[0]
+                done[key] = 0.0 if held[key] else parked_share(store, job, shapes[key])
     engines = {s.engine for k, s in shapes.items() if s.model == "nss" and not held[k]}
     rates = time_rates(sweep.data, cfg.budget(quick).overrides, engines, campaign, log,
                        sec_per_epoch, sec_per_update)
@@ -292,11 +303,31 @@ def estimate(
         for k in keys:
             tag = shapes[k].recipe if shapes[k].model == "nss" else shapes[k].model
             recipes[tag] = recipes.get(tag, 0) + 1
-        left = sum(rates.cost(shapes[k]) for k in keys if not held[k])
-        return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes)
+        left = sum(rates.cost(shapes[k]) * (1.0 - done[k]) for k in keys if not held[k])
+        return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes,
+                         sum(done[k] > 0.0 for k in keys))
 
     per = [cost(name, keys) for name, keys in rows.items()]
     return Estimate(per, cost("total (distinct)", list(shapes)), rates)
+
+
+def parked_share(store: Store | None, job: Job, shape: FitShape) -> float:
+    """The share (0-1) of a paper-recipe fit's epochs that the state parked for ``job`` in
+    the result ``store`` has done (the job's own key, or the key of the job that answers
+    it, :data:`~parknss.experiments.jobs.ALIASES`, whichever is further along); 0 with no
+    parked state, a fast-recipe fit or a store that does not park (module text)."""
+    from parknss.experiments import parked
+    from parknss.experiments.jobs import ALIASES
+    from parknss.experiments.store import ResultStore
+
+    if not isinstance(store, ResultStore) or shape.recipe != "paper" or shape.epochs <= 0:
+        return 0.0
+    jobs = [job] + ([Job(ALIASES[job.fn][0], job.kwargs, job.name)]
+                    if job.fn in ALIASES else [])
+    steps = [parked.read_step(parked.parked_dir(store.root, store.entry_key(j)[0]))
+             for j in jobs]
+    step = max((s for s in steps if s is not None), default=0)
+    return min(step, shape.epochs) / shape.epochs
 
 
 def _identity(job: Job, planned: set[str] | None = None) -> str:
