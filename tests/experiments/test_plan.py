@@ -147,12 +147,12 @@ def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):
     park(shape.epochs - 1)
     after = run()
     assert after.total.parked == 1 and after.total.stored == 0
-    assert after.total.cpu_h == pytest.approx(
-        before.total.cpu_h / shape.epochs)
+    assert after.total.cpu_h == pytest.approx(before.total.cpu_h / shape.epochs)
     park(10 * shape.epochs)  # a state past the fit's epochs leaves nothing, not less
     assert run().total.cpu_h == 0.0
     store.put(conv, {"stub": True}, wall_s=1.0, cpu_s=1.0)  # stored: not counted as parked
-    assert (run().total.parked, run().total.stored) == (0, 1)
+    stored = run()
+    assert (stored.total.parked, stored.total.stored) == (0, 1)
 
 
 def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
