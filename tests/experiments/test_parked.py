@@ -170,3 +170,21 @@ def test_park_command_names_what_it_parked_and_why_not(killed, tmp_path, capsys)
     assert "(unfinished)" in capsys.readouterr().out
     assert main(["results", "park", str(tmp_path / "nowhere"), "--store", str(root)]) == 2
     assert "no fit of this run has written a training state" in capsys.readouterr().err
+
+
+def test_parked_step_reads_the_state_of_the_job_that_answers_a_fold(killed, tmp_path):
+    from parknss.executor import Job
+    from parknss.experiments.jobs import ALIASES, FOLD_JOB
+
+    store = ResultStore(killed.root, log=lambda msg: None)
+    fold = fold_spec(_sweep(killed.data, tmp_path / "b", store), "cv", 1, OVERRIDES)
+    limiter = Job(ALIASES[FOLD_JOB][0], fold.kwargs, fold.name)
+    assert fold.fn == FOLD_JOB
+    assert parked.park_run(killed.run, killed.root)  # the fold fit's state, at step 2
+    assert store.parked_step(fold) == 2 and store.parked_step(limiter) == 0
+    ahead = parked.parked_dir(killed.root, store.entry_key(limiter)[0])
+    shutil.copytree(parked.parked_dir(killed.root, killed.key), ahead)
+    meta = ahead / train_state.META
+    meta.write_text(json.dumps({**json.loads(meta.read_text()), "epoch": 4}))
+    assert store.parked_step(fold) == 4  # the limiter fit answers its fold: further along
+    assert store.parked_step(limiter) == 4

@@ -313,21 +313,14 @@ def estimate(
 
 def parked_share(store: Store | None, job: Job, shape: FitShape) -> float:
     """The share (0-1) of a paper-recipe fit's epochs that the state parked for ``job`` in
-    the result ``store`` has done (the job's own key, or the key of the job that answers
-    it, :data:`~parknss.experiments.jobs.ALIASES`, whichever is further along); 0 with no
-    parked state, a fast-recipe fit or a store that does not park (module text)."""
-    from parknss.experiments import parked
-    from parknss.experiments.jobs import ALIASES
+    the result ``store`` has done (:meth:`~parknss.experiments.store.ResultStore.parked_step`:
+    its own state or that of the job that answers it); 0 with no parked state, a
+    fast-recipe fit or a store that does not park (module text)."""
     from parknss.experiments.store import ResultStore
 
     if not isinstance(store, ResultStore) or shape.recipe != "paper" or shape.epochs <= 0:
         return 0.0
-    jobs = [job] + ([Job(ALIASES[job.fn][0], job.kwargs, job.name)]
-                    if job.fn in ALIASES else [])
-    steps = [parked.read_step(parked.parked_dir(store.root, store.entry_key(j)[0]))
-             for j in jobs]
-    step = max((s for s in steps if s is not None), default=0)
-    return min(step, shape.epochs) / shape.epochs
+    return min(store.parked_step(job), shape.epochs) / shape.epochs
 
 
 def _identity(job: Job, planned: set[str] | None = None) -> str:

@@ -312,6 +312,18 @@ class ResultStore:
             return False, None
         return True, {**value[part], "model_dir": None}  # the answering job's model is gone
 
+    def parked_step(self, job: Job) -> int:
+        """The step of the training state parked for ``job``, or for the job that answers
+        it (:data:`ALIASES`), whichever is further along; 0 when neither has one
+        (:mod:`parknss.experiments.parked`)."""
+        from parknss.experiments import parked
+
+        jobs = [job] + ([Job(ALIASES[job.fn][0], job.kwargs, job.name)]
+                        if job.fn in ALIASES else [])
+        steps = [parked.read_step(parked.parked_dir(self.root, self.entry_key(j)[0]))
+                 for j in jobs]
+        return max((s for s in steps if s is not None), default=0)
+
     def _get(self, job: Job) -> tuple[bool, Any]:
         if not self.read:
             return False, None
