@@ -167,6 +167,11 @@ def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
     assert any("rk4" in m for m in said)
     given = time_rates(data, {}, set(), load_campaign(data), said.append, 1.5, 0.2)
     assert given.epoch == {FUSED: 1.5} and given.update == 0.2 and not given.timed
+    said.clear()  # a fused rate given: RK4 is still timed, and costs its ratio to fused
+    scaled = time_rates(data, {}, {("rk4", "eager")}, load_campaign(data), said.append, 1.5,
+                        0.2)
+    assert scaled.epoch[FUSED] == 1.5 and any("rk4" in m for m in said)
+    assert scaled.epoch[("rk4", "eager")] > 1.5  # four eager stages cost more than one fused
     with pytest.raises(ConfigError, match="non-positive"):
         time_rates(data, {}, set(), load_campaign(data), said.append, 0.0, 0.2)
 

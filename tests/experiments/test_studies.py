@@ -191,13 +191,15 @@ def test_study_fits_take_the_budget_recipe_but_marked_axes_keep_theirs(tiny):
     for axis, *_, job in plan:
         by_axis.setdefault(axis.name, set()).add(recipe(job))
     assert by_axis == {"loss": {"paper"}, "training window": {"fast"}, "yaw readout": {"fast"}}
-    # the shipped config: the paper's recipe everywhere, the paper-protocol axes marked
+    # the shipped config: the paper's recipe but on the integrator axis (the eager loops),
+    # the paper-protocol axes marked
     from parknss.experiments.config import load_experiments_config
 
     shipped = load_experiments_config()
     assert shipped.full.recipe == "paper"
-    marked = {a.name for a in shipped.axes if a.recipe == "paper"}
-    assert marked == {"loss", "lr schedule", "training window"}
+    marked = {a.name: a.recipe for a in shipped.axes if a.recipe is not None}
+    assert marked == {"loss": "paper", "lr schedule": "paper", "training window": "paper",
+                      "integrator": "fast"}
 
 
 def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tmp_path):

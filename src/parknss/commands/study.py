@@ -114,7 +114,9 @@ def register(app: typer.Typer) -> None:
     def estimate_cmd(
         quick: bool = quick_opt, config: Path | None = config_opt, data: Path | None = data_opt,
         sec_per_epoch: float | None = typer.Option(
-            None, "--sec-per-epoch", help="Skip timing epochs; every engine costs this s/epoch."
+            None, "--sec-per-epoch",
+            help="The fused Euler engine's s/epoch (not timed); other engine classes keep "
+            "their timed ratio to it.",
         ),
         sec_per_update: float | None = typer.Option(
             None, "--sec-per-update", help="Skip timing fast-recipe updates; s/update."

@@ -20,7 +20,10 @@ timed on (CV fold 0); ``s_epoch(engine)`` per (integrator, engine) pair the plan
 (fused Euler, eager Euler, midpoint, RK4), timed by paper-size fits of 1 and n epochs
 after a warm-up (the difference removes loading and the first validation: process CPU
 time, since the wall clock of a shared machine measures the neighbours), and ``s_update``
-by fast fits of 1 and 1 + k phase-1 updates. Capacity variants are costed at the
+by fast fits of 1 and 1 + k phase-1 updates. A fused rate given (``--sec-per-epoch``, e.g.
+the mean of the stored fits, validation included) replaces the timed one, and every other
+engine class keeps its timed ratio to it: a given rate costs a midpoint or RK4 fit at the
+midpoint or RK4 price, not at the fused Euler one. Capacity variants are costed at the
 deployed net's rate (an upper bound for the smaller nets); the linear baseline is a
 least-squares fit of a few seconds and counted as free.
 
@@ -148,8 +151,8 @@ def fit_shape(job: Job, campaign) -> FitShape:
 @dataclass
 class Rates:
     """CPU s per paper epoch of each engine class (at ``ref_samples`` samples per epoch)
-    and per fast-recipe phase-1 update on the fused engine; ``timed``: measured here
-    (False: given on the command line)."""
+    and per fast-recipe phase-1 update on the fused engine; ``timed``: some measured here
+    (False: all given on the command line)."""
 
     epoch: dict[tuple[str, str], float]
     update: float
@@ -182,7 +185,9 @@ def time_rates(
     sec_per_update: float | None = None,
 ) -> Rates:
     """Time the rates the plan needs (module text) on CV fold 0 with the budget's
-    ``overrides``; a rate given is not timed (then every engine class costs it)."""
+    ``overrides``. A ``sec_per_update`` given is not timed; a ``sec_per_epoch`` given is
+    the fused Euler rate, and each other engine class the plan needs costs it times that
+    class's rate ratio to fused Euler, timed here."""
     from parknss.experiments.config import merge_overrides
     from parknss.experiments.folds import fold_job
     from parknss.experiments.jobs import FOLD_JOB
@@ -194,17 +199,22 @@ def time_rates(
 
     ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
     epoch: dict[tuple[str, str], float] = {}
-    if sec_per_epoch is not None:
-        epoch = {e: sec_per_epoch for e in {FUSED, *engines}}
-    else:
+    if sec_per_epoch is None or engines - {FUSED}:
         for integ, eng in sorted({FUSED, *engines}):
-            n = 6 if (integ, eng) == FUSED else 2
+            n = 6 if (integ, eng) == FUSED else 3
             log(f"timing paper-size fits of 1 and {n} epochs ({integ}, {eng}) ...")
             one_epoch = paper_fit(integ, eng, 1)
             if not epoch:
                 cpu_of(one_epoch)  # warm-up: imports, scripting
             one = cpu_of(one_epoch)
             epoch[(integ, eng)] = (cpu_of(paper_fit(integ, eng, n)) - one) / (n - 1)
+    if sec_per_epoch is not None:  # the fused rate given; the others keep their timed ratio
+        timed_fused = epoch.get(FUSED, 0.0)
+        if epoch and not timed_fused > 0.0:
+            raise ConfigError(f"timing gave a non-positive fused rate ({timed_fused}): the "
+                              "machine's noise exceeds the timed steps")
+        epoch = {e: sec_per_epoch * epoch[e] / timed_fused if epoch else sec_per_epoch
+                 for e in {FUSED, *engines}}
     if sec_per_update is None:
         k = 20
         log(f"timing fast-recipe fits of 1 and {1 + k} phase-1 updates ...")
@@ -217,7 +227,7 @@ def time_rates(
         raise ConfigError(f"timing gave non-positive rates ({bad or sec_per_update}): the "
                           "machine's noise exceeds the timed steps; pass --sec-per-epoch "
                           "and --sec-per-update")
-    timed = sec_per_epoch is None or sec_per_update is None
+    timed = sec_per_epoch is None or sec_per_update is None or bool(engines - {FUSED})
     return Rates(epoch, sec_per_update, ref, timed)
 
 
