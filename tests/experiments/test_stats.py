@@ -139,6 +139,7 @@ def test_findings_verdicts_follow_the_floor():
                     opt("i", "RK4", 0.1005, wall=60.0),
                 ],
                 True,
+                "fast",
             ),
         ],
         fl,
@@ -154,3 +155,9 @@ def test_findings_verdicts_follow_the_floor():
     assert window.verdict == "not measured"
     euler = next(f for c, f in found.items() if c.startswith("Euler"))
     assert euler.agrees is True and "x3.00 vs eager Euler" in euler.measured
+    assert "(fast recipe; the floor's fits: paper)" in euler.measured
+    from parknss.experiments.study_tables import ablation_tables
+
+    rows = ablation_tables(res)[0].rows  # a fast-recipe axis says so on each of its rows
+    assert all(("fast recipe" in r[-1]) == (r[0] == "integrator") for r in rows)
+    assert {a["name"]: a["recipe"] for a in res.to_json()["axes"]}["integrator"] == "fast"

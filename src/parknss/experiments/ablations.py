@@ -94,6 +94,7 @@ class AxisResult:
     name: str
     options: list[OptionResult]
     cost: bool
+    recipe: str = "paper"  # the training recipe of the axis's fits (train.recipe)
 
     def baseline(self) -> OptionResult:
         return next(o for o in self.options if o.deployed)
@@ -132,6 +133,7 @@ class AblationResult:
     epochs: int
     folds: list[int]
     unmeasured: list[UnmeasuredAxis] = field(default_factory=list)
+    recipe: str = "paper"  # the budget's recipe: that of the seed-noise fits of the floor
 
     def axis(self, name: str) -> AxisResult | None:
         return next((a for a in self.axes if a.name == name), None)
@@ -143,11 +145,13 @@ class AblationResult:
         return {
             "epochs": self.epochs,
             "folds": self.folds,
+            "recipe": self.recipe,
             "floor": self.floor.to_json(),
             "unmeasured": [asdict(u) for u in self.unmeasured],
             "axes": [
                 {
                     "name": a.name,
+                    "recipe": a.recipe,
                     "options": [
                         {
                             **{k: v for k, v in asdict(o).items() if k != "lr_sweep"},
@@ -263,8 +267,9 @@ def ablations(
                 if p[0] is axis and p[1] is opt
             ]
             opts.append(_option(axis, opt, rows, cfg.loss_lr_metric))
-        axes.append(AxisResult(axis.name, opts, axis.cost))
-    return AblationResult(axes, floor, budget.epochs, list(budget.ablation_folds), unmeasured)
+        axes.append(AxisResult(axis.name, opts, axis.cost, axis.recipe or budget.recipe))
+    return AblationResult(axes, floor, budget.epochs, list(budget.ablation_folds), unmeasured,
+                          budget.recipe)
 
 
 def _stored_axes(cfg: ExperimentsConfig, plan, sweep: Sweep):

@@ -171,6 +171,8 @@ def _integrator_finding(res: AblationResult) -> Finding:
         ratio_eager = ax.cost_ratio(rk4) / ax.cost_ratio(eager)
         text += f", x{ratio_eager:.2f} vs eager Euler"
     ratio = ratio_eager if math.isfinite(ratio_eager) else ratio_fused
+    if ax.recipe != res.recipe:  # the floor's seeds trained with the budget's recipe
+        text += f" ({ax.recipe} recipe; the floor's fits: {res.recipe})"
     return Finding(claim, f"{text}; {fl.describe()}", _null_verdict(tie, ratio > 1.5), _why(fl))
 
 

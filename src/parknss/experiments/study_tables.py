@@ -97,6 +97,8 @@ def ablation_tables(res: AblationResult) -> list[Table]:
             extra = f"L = {sorted(set(o.windows))}" if o.windows else ""
             if o.lr is not None:
                 extra = f"LR {o.lr:g}"
+            if ax.recipe != "paper":  # the title's epochs are the paper recipe's
+                extra = ", ".join(x for x in (extra, f"{ax.recipe} recipe") if x)
             rows.append(
                 [
                     ax.name,
