@@ -199,7 +199,8 @@ def time_rates(
 
     ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
     epoch: dict[tuple[str, str], float] = {}
-    if sec_per_epoch is None or engines - {FUSED}:
+    time_epochs = sec_per_epoch is None or bool(engines - {FUSED})
+    if time_epochs:
         for integ, eng in sorted({FUSED, *engines}):
             n = 6 if (integ, eng) == FUSED else 3
             log(f"timing paper-size fits of 1 and {n} epochs ({integ}, {eng}) ...")
@@ -209,13 +210,14 @@ def time_rates(
             one = cpu_of(one_epoch)
             epoch[(integ, eng)] = (cpu_of(paper_fit(integ, eng, n)) - one) / (n - 1)
     if sec_per_epoch is not None:  # the fused rate given; the others keep their timed ratio
-        timed_fused = epoch.get(FUSED, 0.0)
-        if epoch and not timed_fused > 0.0:
-            raise ConfigError(f"timing gave a non-positive fused rate ({timed_fused}): the "
+        fused = epoch.get(FUSED)  # None: nothing timed (the plan needs fused Euler only)
+        if fused is not None and not fused > 0.0:
+            raise ConfigError(f"timing gave a non-positive fused rate ({fused}): the "
                               "machine's noise exceeds the timed steps")
-        epoch = {e: sec_per_epoch * epoch[e] / timed_fused if epoch else sec_per_epoch
+        epoch = {e: sec_per_epoch * (epoch[e] / fused if fused else 1.0)
                  for e in {FUSED, *engines}}
-    if sec_per_update is None:
+    timed_update = sec_per_update is None
+    if timed_update:
         k = 20
         log(f"timing fast-recipe fits of 1 and {1 + k} phase-1 updates ...")
         fast = {"train": {"recipe": "fast"}}
@@ -227,8 +229,7 @@ def time_rates(
         raise ConfigError(f"timing gave non-positive rates ({bad or sec_per_update}): the "
                           "machine's noise exceeds the timed steps; pass --sec-per-epoch "
                           "and --sec-per-update")
-    timed = sec_per_epoch is None or sec_per_update is None or bool(engines - {FUSED})
-    return Rates(epoch, sec_per_update, ref, timed)
+    return Rates(epoch, sec_per_update, ref, time_epochs or timed_update)
 
 
 @dataclass
