@@ -84,15 +84,27 @@ def test_fit_shapes_follow_recipe_engine_window_and_training_set(tiny):
 
 
 def test_cost_arithmetic():
-    rates = Rates({FUSED: 2.0, ("rk4", "eager"): 10.0}, update=0.5, ref_samples=1000)
+    rk4, mid = ("rk4", "eager"), ("midpoint", "eager")
+    rates = Rates({FUSED: 2.0, rk4: 10.0, mid: 4.0}, {FUSED: 0.5, mid: 3.0}, ref_samples=1000)
     assert rates.cost(FitShape("nss", "paper", FUSED, 100, 0, 1000)) == pytest.approx(200.0)
     assert rates.cost(FitShape("nss", "paper", FUSED, 100, 0, 500)) == pytest.approx(100.0)
-    # fast: updates at the update rate (scaled by the engine), finish epochs as paper ones
+    # fast: updates at the engine's update rate, finish epochs as paper ones
     assert rates.cost(FitShape("nss", "fast", FUSED, 10, 40, 1000)) == pytest.approx(40.0)
-    assert rates.cost(FitShape("nss", "fast", ("rk4", "eager"), 10, 40, 1000)) == pytest.approx(
+    assert rates.cost(FitShape("nss", "fast", mid, 10, 40, 1000)) == pytest.approx(
+        40 * 3.0 + 10 * 4.0)
+    # an update rate not timed: the fused one times the class's epoch ratio
+    assert rates.cost(FitShape("nss", "fast", rk4, 10, 40, 1000)) == pytest.approx(
         40 * 0.5 * 5 + 100.0)
-    assert rates.cost(FitShape("nss", "paper", ("midpoint", "eager"), 1, 0, 1000)) == 2.0
+    assert rates.cost(FitShape("nss", "paper", ("euler", "eager"), 1, 0, 1000)) == 2.0
     assert rates.cost(FitShape("linear")) == 0.0
+    # the first s steps: a paper fit's epochs; a fast fit's updates, then finish epochs
+    paper = FitShape("nss", "paper", FUSED, 100, 0, 1000)
+    assert rates.cost(paper, 30) == pytest.approx(60.0)
+    assert rates.cost(paper, 0) == 0.0 and rates.cost(paper, 500) == rates.cost(paper)
+    fast = FitShape("nss", "fast", mid, 10, 40, 1000)
+    assert rates.cost(fast, 20) == pytest.approx(20 * 3.0)
+    assert rates.cost(fast, 45) == pytest.approx(40 * 3.0 + 5 * 4.0)
+    assert rates.cost(fast, 10_000) == pytest.approx(rates.cost(fast))
 
 
 def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path):
@@ -146,6 +158,7 @@ def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):
 
     park(shape.epochs - 1)
     after = run()
+    assert before.rates.cost(shape, shape.epochs - 1) > 0.0
     assert after.total.parked == 1 and after.total.stored == 0
     assert after.total.cpu_h == pytest.approx(before.total.cpu_h / shape.epochs)
     park(10 * shape.epochs)  # a state past the fit's epochs leaves nothing, not less
@@ -155,18 +168,53 @@ def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):
     assert (stored.total.parked, stored.total.stored) == (0, 1)
 
 
+def test_a_parked_fast_fit_is_credited_with_its_updates_then_its_finish_epochs(tiny, tmp_path):
+    import json
+
+    from parknss.experiments import parked
+    from parknss.nss.train_state import FORMAT, META
+
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    store = ResultStore(tmp_path / "results", log=lambda msg: None)
+    (fast,) = [j for j in study_jobs("time_to_accuracy", cfg, False, sweep)
+               if fit_shape(j, load_campaign(data)).recipe == "fast"][:1]
+    shape = fit_shape(fast, load_campaign(data))
+
+    def run():
+        return estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
+                        sec_per_update=0.1, studies=("time_to_accuracy",))
+
+    before = run()
+    folder = parked.parked_dir(store.root, store.entry_key(fast)[0])
+    folder.mkdir(parents=True)
+    rates = before.rates
+    epoch = rates.cost(shape, shape.updates + 1) - rates.cost(shape, shape.updates)
+    assert epoch == pytest.approx(rates.epoch_rate(shape.engine) * shape.samples
+                                  / rates.ref_samples)
+    for step, done in ((3, 3 * 0.1), (shape.updates, shape.updates * 0.1),
+                       (shape.updates + 1, shape.updates * 0.1 + epoch)):
+        (folder / META).write_text(json.dumps({"format": FORMAT, "epoch": step}))
+        after = run()
+        assert after.total.parked == 1
+        assert (before.total.cpu_h - after.total.cpu_h) * 3600 == pytest.approx(done)
+
+
 def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
     from parknss.experiments.plan import time_rates
 
     data, cfg = tiny
     said: list[str] = []
-    rates = time_rates(data, cfg.budget(False).overrides, {("rk4", "eager")},
-                       load_campaign(data), said.append)
-    assert set(rates.epoch) == {FUSED, ("rk4", "eager")} and rates.timed
-    assert all(v > 0 for v in rates.epoch.values()) and rates.update > 0
-    assert any("rk4" in m for m in said)
+    mid = ("midpoint", "eager")
+    rates = time_rates(data, cfg.budget(False).overrides, {("rk4", "eager"), mid},
+                       load_campaign(data), said.append, fast_engines={mid})
+    assert set(rates.epoch) == {FUSED, ("rk4", "eager"), mid} and rates.timed
+    assert set(rates.update) == {FUSED, mid}  # update rates of the fast fits' engines
+    assert all(v > 0 for v in [*rates.epoch.values(), *rates.update.values()])
+    assert any("rk4" in m for m in said) and any("updates" in m and "midpoint" in m
+                                                  for m in said)
     given = time_rates(data, {}, set(), load_campaign(data), said.append, 1.5, 0.2)
-    assert given.epoch == {FUSED: 1.5} and given.update == 0.2 and not given.timed
+    assert given.epoch == {FUSED: 1.5} and given.update == {FUSED: 0.2} and not given.timed
     said.clear()  # a fused rate given: RK4 is still timed, and costs its ratio to fused
     scaled = time_rates(data, {}, {("rk4", "eager")}, load_campaign(data), said.append, 1.5,
                         0.2)

@@ -119,7 +119,9 @@ def register(app: typer.Typer) -> None:
             "their timed ratio to it.",
         ),
         sec_per_update: float | None = typer.Option(
-            None, "--sec-per-update", help="Skip timing fast-recipe updates; s/update."
+            None, "--sec-per-update",
+            help="The fused Euler engine's s per fast-recipe update (not timed); the "
+            "engines of fast eager fits keep their timed ratio to it.",
         ),
         store: str | None = store_opt,
         as_json: bool = json_opt,

@@ -11,7 +11,7 @@ Cost of a fit, CPU s (one torch thread): from its resolved NSS config and traini
 trials,
 
     paper recipe:  epochs x s_epoch(engine) x S / S_ref
-    fast recipe:   updates x s_update x s_epoch(engine) / s_epoch(fused Euler)
+    fast recipe:   updates x s_update(engine)
                    + finish_epochs x s_epoch(engine) x S / S_ref
 
 with S the samples of one paper epoch (the training trials tiled into the fit's windows,
@@ -19,19 +19,24 @@ padding included: ``sum ceil(n_i / L) x L``) and S_ref those of the fit the rate
 timed on (CV fold 0); ``s_epoch(engine)`` per (integrator, engine) pair the plan holds
 (fused Euler, eager Euler, midpoint, RK4), timed by paper-size fits of 1 and n epochs
 after a warm-up (the difference removes loading and the first validation: process CPU
-time, since the wall clock of a shared machine measures the neighbours), and ``s_update``
-by fast fits of 1 and 1 + k phase-1 updates. A fused rate given (``--sec-per-epoch``, e.g.
-the mean of the stored fits, validation included) replaces the timed one, and every other
-engine class keeps its timed ratio to it: a given rate costs a midpoint or RK4 fit at the
-midpoint or RK4 price, not at the fused Euler one. Capacity variants are costed at the
-deployed net's rate (an upper bound for the smaller nets); the linear baseline is a
-least-squares fit of a few seconds and counted as free.
+time, since the wall clock of a shared machine measures the neighbours), and
+``s_update(engine)`` per engine class the plan's fast-recipe fits use, by fast fits of 1
+and 1 + k phase-1 updates. The two are timed apart because they scale apart: a phase-1
+update is a minibatch of short windows, where an eager engine's per-op overhead weighs
+more than in a full-batch epoch (measured on the AMD core: a midpoint fast fit costs
+~4.8x a fused Euler one, its paper epoch ~2.5x). A fused rate given (``--sec-per-epoch``,
+``--sec-per-update``, e.g. the means of the stored fits, validation included) replaces the
+timed one, and every other engine class keeps its timed ratio to it: a given rate costs a
+midpoint or RK4 fit at the midpoint or RK4 price, not at the fused Euler one. Capacity
+variants are costed at the deployed net's rate (an upper bound for the smaller nets); the
+linear baseline is a least-squares fit of a few seconds and counted as free.
 
-A paper-recipe fit that the store lacks but holds a parked state of
-(:mod:`parknss.experiments.parked`: ``<store>/inflight/<store key>/``, at epoch e of E)
-costs the epochs it has left, ``(1 - e/E)`` of the fit; a fast-recipe fit's parked
-state is not credited (its phases cost unequally), nor is a state in a run folder that
-was not parked (run folders are scratch).
+A fit that the store lacks but holds a parked state of (:mod:`parknss.experiments.parked`:
+``<store>/inflight/<store key>/``, at step s) costs what its remaining steps cost: a
+paper-recipe fit's epochs after s; a fast-recipe fit's steps are its updates and then its
+finish epochs, so a state at step s has done ``min(s, updates)`` updates and
+``clip(s - updates, 0, finish_epochs)`` finish epochs. A state in a run folder that was
+not parked is not credited (run folders are scratch).
 """
 
 from __future__ import annotations
@@ -150,12 +155,12 @@ def fit_shape(job: Job, campaign) -> FitShape:
 
 @dataclass
 class Rates:
-    """CPU s per paper epoch of each engine class (at ``ref_samples`` samples per epoch)
-    and per fast-recipe phase-1 update on the fused engine; ``timed``: some measured here
-    (False: all given on the command line)."""
+    """CPU s per paper epoch (at ``ref_samples`` samples per epoch) and per fast-recipe
+    phase-1 update of each engine class; ``timed``: some measured here (False: all given
+    on the command line)."""
 
     epoch: dict[tuple[str, str], float]
-    update: float
+    update: dict[tuple[str, str], float]
     ref_samples: int
     timed: bool = True
 
@@ -163,14 +168,24 @@ class Rates:
         """s/epoch of an engine class; one not timed is counted at the fused rate."""
         return self.epoch.get(engine, self.epoch[FUSED])
 
-    def cost(self, shape: FitShape) -> float:
-        """CPU s of a fit of this shape (module text)."""
+    def update_rate(self, engine: tuple[str, str]) -> float:
+        """s/update of an engine class; one not timed is counted at the fused update rate
+        times the class's epoch ratio to fused Euler."""
+        if engine in self.update:
+            return self.update[engine]
+        return self.update[FUSED] * self.epoch_rate(engine) / self.epoch[FUSED]
+
+    def cost(self, shape: FitShape, step: int | None = None) -> float:
+        """CPU s of a fit of this shape, or of its first ``step`` steps (module text)."""
         if shape.model != "nss":
             return 0.0
-        per_epoch = self.epoch_rate(shape.engine)
         scale = shape.samples / self.ref_samples if self.ref_samples else 1.0
-        fast = shape.updates * self.update * per_epoch / self.epoch[FUSED]
-        return shape.epochs * per_epoch * scale + fast
+        updates, epochs = shape.updates, shape.epochs
+        if step is not None:
+            updates = min(max(step, 0), shape.updates)
+            epochs = min(max(step - shape.updates, 0), shape.epochs)
+        return (updates * self.update_rate(shape.engine)
+                + epochs * self.epoch_rate(shape.engine) * scale)
 
 
 def paper_fit(integrator: str, engine: str, epochs: int) -> dict:
@@ -179,57 +194,67 @@ def paper_fit(integrator: str, engine: str, epochs: int) -> dict:
             "train": {"recipe": "paper", "epochs": epochs}}
 
 
+def fast_fit(integrator: str, engine: str, updates: int) -> dict:
+    """The overrides of a fast-recipe timing fit of ``updates`` phase-1 updates and one
+    finish epoch on one engine class."""
+    return {"model": {"integrator": integrator, "engine": engine},
+            "train": {"recipe": "fast"}, "fast": {"updates": updates, "finish_epochs": 1}}
+
+
 def time_rates(
     data: str | None, overrides: dict, engines: set[tuple[str, str]], campaign,
     log: Callable[[str], None], sec_per_epoch: float | None = None,
-    sec_per_update: float | None = None,
+    sec_per_update: float | None = None, fast_engines: set[tuple[str, str]] | None = None,
 ) -> Rates:
     """Time the rates the plan needs (module text) on CV fold 0 with the budget's
-    ``overrides``. A ``sec_per_update`` given is not timed; a ``sec_per_epoch`` given is
-    the fused Euler rate, and each other engine class the plan needs costs it times that
-    class's rate ratio to fused Euler, timed here."""
+    ``overrides``: the epoch rate of fused Euler and of each class in ``engines``, the
+    update rate of fused Euler and of each class in ``fast_engines`` (the engines of the
+    plan's fast-recipe fits). A rate given is the fused Euler one and is not timed unless
+    another class needs its ratio to it; each other class costs the given rate times its
+    timed ratio to fused Euler."""
     from parknss.experiments.config import merge_overrides
     from parknss.experiments.folds import fold_job
-    from parknss.experiments.jobs import FOLD_JOB
+
+    warm: list[bool] = []
 
     def cpu_of(ov: dict) -> float:
+        if not warm:  # imports, scripting
+            warm.append(True)
+            fold_job("cv", 0, data=data, overrides=merge_overrides(overrides, ov))
         cpu0 = time.process_time()
         fold_job("cv", 0, data=data, overrides=merge_overrides(overrides, ov))
         return time.process_time() - cpu0
 
-    ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
-    epoch: dict[tuple[str, str], float] = {}
-    time_epochs = sec_per_epoch is None or bool(engines - {FUSED})
-    if time_epochs:
-        for integ, eng in sorted({FUSED, *engines}):
-            n = 6 if (integ, eng) == FUSED else 3
-            log(f"timing paper-size fits of 1 and {n} epochs ({integ}, {eng}) ...")
-            one_epoch = paper_fit(integ, eng, 1)
-            if not epoch:
-                cpu_of(one_epoch)  # warm-up: imports, scripting
-            one = cpu_of(one_epoch)
-            epoch[(integ, eng)] = (cpu_of(paper_fit(integ, eng, n)) - one) / (n - 1)
-    if sec_per_epoch is not None:  # the fused rate given; the others keep their timed ratio
-        fused = epoch.get(FUSED)  # None: nothing timed (the plan needs fused Euler only)
+    def timed(classes: set[tuple[str, str]], given: float | None, what: str,
+              fit: Callable[[str, str, int], dict], n_fused: int, n_other: int,
+              ) -> dict[tuple[str, str], float]:
+        rate: dict[tuple[str, str], float] = {}
+        if given is None or classes - {FUSED}:
+            for integ, eng in sorted({FUSED, *classes}):
+                n = n_fused if (integ, eng) == FUSED else n_other
+                log(f"timing {what} of 1 and {n} ({integ}, {eng}) ...")
+                one = cpu_of(fit(integ, eng, 1))
+                rate[(integ, eng)] = (cpu_of(fit(integ, eng, n)) - one) / (n - 1)
+        if given is None:
+            return rate
+        fused = rate.get(FUSED)  # None: nothing timed (fused Euler only)
         if fused is not None and not fused > 0.0:
             raise ConfigError(f"timing gave a non-positive fused rate ({fused}): the "
                               "machine's noise exceeds the timed steps")
-        epoch = {e: sec_per_epoch * (epoch[e] / fused if fused else 1.0)
-                 for e in {FUSED, *engines}}
-    timed_update = sec_per_update is None
-    if timed_update:
-        k = 20
-        log(f"timing fast-recipe fits of 1 and {1 + k} phase-1 updates ...")
-        fast = {"train": {"recipe": "fast"}}
-        one = cpu_of({**fast, "fast": {"updates": 1, "finish_epochs": 1}})
-        many = cpu_of({**fast, "fast": {"updates": 1 + k, "finish_epochs": 1}})
-        sec_per_update = (many - one) / k
-    bad = {"/".join(k): v for k, v in epoch.items() if not v > 0.0}
-    if bad or not sec_per_update > 0.0:
-        raise ConfigError(f"timing gave non-positive rates ({bad or sec_per_update}): the "
-                          "machine's noise exceeds the timed steps; pass --sec-per-epoch "
-                          "and --sec-per-update")
-    return Rates(epoch, sec_per_update, ref, time_epochs or timed_update)
+        return {e: given * (rate[e] / fused if fused else 1.0) for e in {FUSED, *classes}}
+
+    from parknss.experiments.jobs import FOLD_JOB
+
+    ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
+    epoch = timed(engines, sec_per_epoch, "paper-size fits, epochs", paper_fit, 6, 3)
+    update = timed(set(fast_engines or ()), sec_per_update,
+                   "fast-recipe fits, phase-1 updates", fast_fit, 21, 11)
+    bad = {f"{'/'.join(k)} {kind}": v for kind, rates in (("epoch", epoch), ("update", update))
+           for k, v in rates.items() if not v > 0.0}
+    if bad:
+        raise ConfigError(f"timing gave non-positive rates ({bad}): the machine's noise "
+                          "exceeds the timed steps; pass --sec-per-epoch and --sec-per-update")
+    return Rates(epoch, update, ref, bool(warm))
 
 
 @dataclass
@@ -260,7 +285,7 @@ class Estimate:
     def to_json(self) -> dict:
         return {
             "sec_per_epoch": {"/".join(k): v for k, v in self.rates.epoch.items()},
-            "sec_per_update": self.rates.update,
+            "sec_per_update": {"/".join(k): v for k, v in self.rates.update.items()},
             "ref_samples": self.rates.ref_samples,
             "studies": [s.to_json() for s in self.studies],
             "total": self.total.to_json(),
@@ -268,9 +293,11 @@ class Estimate:
 
     def text(self) -> str:
         """The table ``parknss study estimate`` prints."""
-        rates = ", ".join(f"{'/'.join(k)} {v:.2f}" for k, v in self.rates.epoch.items())
+        epochs = ", ".join(f"{'/'.join(k)} {v:.2f}" for k, v in sorted(self.rates.epoch.items()))
+        updates = ", ".join(f"{'/'.join(k)} {v:.3f}"
+                            for k, v in sorted(self.rates.update.items()))
         lines = [
-            f"CPU s per paper epoch: {rates}; per fast update: {self.rates.update:.3f}"
+            f"CPU s per paper epoch: {epochs}; per fast update: {updates or '-'}"
             + ("" if self.rates.timed else " (given)"),
             f"{'study':<28}{'fits':>6}{'stored':>8}{'parked':>8}{'CPU h left':>12}   recipes",
         ]
@@ -291,7 +318,7 @@ def estimate(
     campaign = sweep.campaign()
     shapes: dict[str, FitShape] = {}
     held: dict[str, bool] = {}
-    done: dict[str, float] = {}  # the share of each fit its parked state has done
+    step: dict[str, int] = {}  # the step of each fit's parked state (0: none)
     rows: dict[str, list[str]] = {}  # the distinct fits of each row, by fit key
     planned = plan_rows(cfg, quick, sweep, studies)
     ids = {_identity(job) for jobs in planned.values() for job in jobs}
@@ -304,34 +331,33 @@ def estimate(
             if key not in shapes:
                 shapes[key] = fit_shape(job, campaign)
                 held[key] = store is not None and store.get(job)[0]
-                done[key] = 0.0 if held[key] else parked_share(store, job, shapes[key])
-    engines = {s.engine for k, s in shapes.items() if s.model == "nss" and not held[k]}
-    rates = time_rates(sweep.data, cfg.budget(quick).overrides, engines, campaign, log,
-                       sec_per_epoch, sec_per_update)
+                step[key] = 0 if held[key] else parked_step(store, job)
+    left = [s for k, s in shapes.items() if s.model == "nss" and not held[k]]
+    rates = time_rates(sweep.data, cfg.budget(quick).overrides, {s.engine for s in left},
+                       campaign, log, sec_per_epoch, sec_per_update,
+                       {s.engine for s in left if s.recipe == "fast"})
 
     def cost(name: str, keys: list[str]) -> StudyCost:
         recipes: dict[str, int] = {}
         for k in keys:
             tag = shapes[k].recipe if shapes[k].model == "nss" else shapes[k].model
             recipes[tag] = recipes.get(tag, 0) + 1
-        left = sum(rates.cost(shapes[k]) * (1.0 - done[k]) for k in keys if not held[k])
+        left = sum(rates.cost(shapes[k]) - rates.cost(shapes[k], step[k])
+                   for k in keys if not held[k])
         return StudyCost(name, len(keys), sum(held[k] for k in keys), left / 3600.0, recipes,
-                         sum(done[k] > 0.0 for k in keys))
+                         sum(step[k] > 0 for k in keys))
 
     per = [cost(name, keys) for name, keys in rows.items()]
     return Estimate(per, cost("total (distinct)", list(shapes)), rates)
 
 
-def parked_share(store: Store | None, job: Job, shape: FitShape) -> float:
-    """The share (0-1) of a paper-recipe fit's epochs that the state parked for ``job`` in
-    the result ``store`` has done (:meth:`~parknss.experiments.store.ResultStore.parked_step`:
-    its own state or that of the job that answers it); 0 with no parked state, a
-    fast-recipe fit or a store that does not park (module text)."""
+def parked_step(store: Store | None, job: Job) -> int:
+    """The step of the state parked for ``job`` in the result ``store``
+    (:meth:`~parknss.experiments.store.ResultStore.parked_step`: its own state or that of
+    the job that answers it); 0 with no parked state or a store that does not park."""
     from parknss.experiments.store import ResultStore
 
-    if not isinstance(store, ResultStore) or shape.recipe != "paper" or shape.epochs <= 0:
-        return 0.0
-    return min(store.parked_step(job), shape.epochs) / shape.epochs
+    return store.parked_step(job) if isinstance(store, ResultStore) else 0
 
 
 def _identity(job: Job, planned: set[str] | None = None) -> str:
