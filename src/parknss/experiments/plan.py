@@ -214,6 +214,7 @@ def time_rates(
     timed ratio to fused Euler."""
     from parknss.experiments.config import merge_overrides
     from parknss.experiments.folds import fold_job
+    from parknss.experiments.jobs import FOLD_JOB
 
     warm: list[bool] = []
 
@@ -242,8 +243,6 @@ def time_rates(
             raise ConfigError(f"timing gave a non-positive fused rate ({fused}): the "
                               "machine's noise exceeds the timed steps")
         return {e: given * (rate[e] / fused if fused else 1.0) for e in {FUSED, *classes}}
-
-    from parknss.experiments.jobs import FOLD_JOB
 
     ref = fit_shape(Job(FOLD_JOB, {"data": data, "overrides": overrides}), campaign).samples
     epoch = timed(engines, sec_per_epoch, "paper-size fits, epochs", paper_fit, 6, 3)
