@@ -177,9 +177,10 @@ def test_a_parked_fast_fit_is_credited_with_its_updates_then_its_finish_epochs(t
     data, cfg = tiny
     sweep = Sweep(data=data, progress=False)
     store = ResultStore(tmp_path / "results", log=lambda msg: None)
-    (fast,) = [j for j in study_jobs("time_to_accuracy", cfg, False, sweep)
-               if fit_shape(j, load_campaign(data)).recipe == "fast"][:1]
-    shape = fit_shape(fast, load_campaign(data))
+    camp = load_campaign(data)
+    fast = next(j for j in study_jobs("time_to_accuracy", cfg, False, sweep)
+                if fit_shape(j, camp).recipe == "fast")
+    shape = fit_shape(fast, camp)
 
     def run():
         return estimate(cfg, False, sweep, store, lambda m: None, sec_per_epoch=1.0,
