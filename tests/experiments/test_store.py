@@ -361,7 +361,8 @@ def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_st
     rows = run_progress_of(tmp_path / "a")
     assert sorted(r.name for r in rows) == ["seed 0", "seed 1", "seed 2"]
     assert all(r.done and r.step == r.steps == 2 and r.cpu_s > 0 for r in rows)
-    assert all(r.uniform and r.cpu_left_s == 0.0 for r in rows)  # paper recipe, done
+    assert all(r.phases == [("paper", 2)] and r.cpu_left_s == 0.0 for r in rows)  # done
+    assert all(r.rates["paper"] == pytest.approx(r.cpu_s / 2, rel=0.2) for r in rows)
     assert main(["study", "progress", str(tmp_path / "a")]) == 0
     assert "3 fits with a training state, 3 done" in capsys.readouterr().out
     (tmp_path / "a" / "state" / rows[0].folder / "train_state.json").write_text("{")
@@ -379,15 +380,35 @@ def test_progress_names_each_fit_of_a_run_folder_from_its_plan(tmp_path, tiny_st
         run_progress_of(tmp_path / "nowhere")
 
 
-def test_cpu_left_extrapolates_only_a_fit_whose_steps_cost_the_same():
-    from parknss.experiments.progress import FitProgress
+def test_cpu_left_prices_each_phase_at_its_own_cost_per_step():
+    from parknss.experiments.progress import FitProgress, borrow_rates, phase_rates
 
-    paper = FitProgress("f", "seed 1", step=50, steps=200, cpu_s=100.0, uniform=True)
+    paper = FitProgress("f", "seed 1", step=50, steps=200, cpu_s=100.0,
+                        phases=[("paper", 200)], rates={"paper": 2.0})
     assert paper.cpu_left_s == 300.0 and paper.to_json()["cpu_left_s"] == 300.0
     assert " 300 " in paper.line()
-    assert FitProgress("f", "fast", step=50, steps=200, cpu_s=100.0).cpu_left_s is None
-    assert FitProgress("f", "?", step=50, cpu_s=100.0, uniform=True).cpu_left_s is None
-    assert FitProgress("f", "new", step=0, steps=200, cpu_s=0.0, uniform=True).cpu_left_s is None
+    assert FitProgress("f", "?", step=50, cpu_s=100.0).cpu_left_s is None  # plan unknown
+    new = FitProgress("f", "new", steps=200, phases=[("paper", 200)], rates={"paper": 2.0})
+    assert new.cpu_left_s is None  # not started
+    # a fast fit: 20 updates at 1 s, then 5 finish epochs at 4 s (cumulative CPU per row)
+    rows = [{"epoch": k, "phase": "short", "cpu_s": 1.0 * k} for k in range(1, 21)]
+    rows += [{"epoch": 20 + k, "phase": "full", "cpu_s": 20.0 + 4.0 * k} for k in (1, 2)]
+    assert phase_rates(rows) == {"short": 1.0, "full": 4.0}
+    assert phase_rates([{"cpu_s": 3.0}, {"cpu_s": 5.0}]) == {"paper": 2.5}
+    assert phase_rates([{"phase": "short"}, {"phase": "short", "cpu_s": 9.0}]) == {}
+    phases = [("short", 20), ("full", 5)]
+    done = FitProgress("a", "fast f0", step=22, steps=25, cpu_s=28.0, phases=phases,
+                       rates=phase_rates(rows), engine=("rk4", "eager"))
+    assert done.steps_left() == {"short": 0, "full": 3} and done.cpu_left_s == 12.0
+    early = FitProgress("b", "fast f1", step=5, steps=25, cpu_s=10.0, phases=phases,
+                        rates={"short": 2.0}, engine=("rk4", "eager"))
+    other = FitProgress("c", "fast f2", step=5, steps=25, cpu_s=10.0, phases=phases,
+                        rates={"short": 2.0}, engine=("euler", "eager"))
+    assert early.cpu_left_s is None  # its finish epochs have no measured cost yet
+    borrow_rates([done, early, other])
+    assert early.borrowed == ["full"] and early.cpu_left_s == 15 * 2.0 + 5 * 4.0
+    assert "~50 " in early.line() and not done.borrowed
+    assert other.cpu_left_s is None and not other.borrowed  # no fit of its engine ran it
 
 
 def test_the_listing_gives_a_resumed_fit_its_whole_cpu_time(tmp_path):
