@@ -161,3 +161,35 @@ def test_findings_verdicts_follow_the_floor():
     rows = ablation_tables(res)[0].rows  # a fast-recipe axis says so on each of its rows
     assert all(("fast recipe" in r[-1]) == (r[0] == "integrator") for r in rows)
     assert {a["name"]: a["recipe"] for a in res.to_json()["axes"]}["integrator"] == "fast"
+
+
+def test_integrator_cost_is_cpu_time_when_every_fit_has_it():
+    from parknss.experiments.ablations import AblationResult, AxisResult, OptionResult
+    from parknss.experiments.findings import ablation_findings
+    from parknss.experiments.study_tables import ablation_tables
+    from parknss.experiments.sweep import FoldScore
+
+    def opt(label, vxs, walls, cpus, deployed=False):
+        scores = [FoldScore(v, v, 1.0, v, 1.0, w, 3, 12, epochs=10, cpu_s=c)
+                  for v, w, c in zip(vxs, walls, cpus, strict=True)]
+        return OptionResult("integrator", label, deployed, scores)
+
+    nan = math.nan
+    # the RK4 fits shared their core (wall 2x their CPU): the CPU ratio is the cost
+    axis = AxisResult("integrator", [
+        opt("Euler (fused)", [0.1, 0.2], [10.0, 10.0], [10.0, 10.0], deployed=True),
+        opt("Euler (eager)", [0.1, 0.2], [20.0, 20.0], [20.0, 20.0]),
+        opt("RK4", [0.101, 0.196], [140.0, 140.0], [70.0, 70.0]),
+    ], True, "fast")
+    fl = NoiseFloor(vx=0.02, yaw=0.035, n_seeds=5, source="measured")
+    res = AblationResult([axis], fl, 3000, [0, 1])
+    assert axis.cost_basis("RK4") == "CPU" and axis.cost_ratio("RK4", "Euler (eager)") == 3.5
+    euler = next(f for f in ablation_findings(res) if f.claim.startswith("Euler"))
+    assert "x7.00 vs fused Euler (CPU per step), x3.50 vs eager Euler (CPU" in euler.measured
+    assert "(per fold +1.0/-2.0 %)" in euler.measured and euler.agrees is True
+    row = next(r for r in ablation_tables(res)[0].rows if r[1] == "RK4")
+    assert row[9:11] == [7.0, "x7.00 (CPU)"]
+    # one fold's fit without its CPU time: that option's cost falls back to wall
+    axis.options[2].scores[1].cpu_s = nan
+    assert axis.cost_basis("RK4") == "wall" and axis.cost_ratio("RK4") == 14.0
+    assert axis.cost_basis("Euler (eager)") == "CPU"

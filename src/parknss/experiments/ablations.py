@@ -85,8 +85,17 @@ class OptionResult:
         return nanmean([s.wall_s for s in self.scores])
 
     def wall_per_epoch(self) -> float:
-        """Mean wall clock per epoch, s (the cost measure: independent of the epoch cap)."""
+        """Mean wall clock per epoch, s (independent of the epoch cap)."""
         return nanmean([s.wall_per_epoch for s in self.scores])
+
+    def cpu_per_epoch(self) -> float:
+        """Mean CPU time per epoch, s; NaN unless every fold's fit has its CPU time."""
+        per = [s.cpu_per_epoch for s in self.scores]
+        return nanmean(per) if per and all(math.isfinite(c) for c in per) else math.nan
+
+    def per_epoch(self, basis: str) -> float:
+        """Mean cost per epoch, s, on ``basis`` "CPU" or "wall"."""
+        return self.cpu_per_epoch() if basis == "CPU" else self.wall_per_epoch()
 
 
 @dataclass
@@ -107,10 +116,22 @@ class AxisResult:
     def best(self, channel: str) -> OptionResult:
         return min(self.options, key=lambda o: (math.isnan(o.mean(channel)), o.mean(channel)))
 
-    def cost_ratio(self, label: str) -> float:
-        """Wall clock per epoch of an option over the deployed option's."""
-        opt = next(o for o in self.options if o.label == label)
-        return relative_effect(opt.wall_per_epoch(), self.baseline().wall_per_epoch()) + 1.0
+    def cost_basis(self, label: str, ref: str | None = None) -> str:
+        """"CPU" when both options (``ref``: default the deployed one) have every fold's
+        CPU time, else "wall": CPU time is the cost measure, as a fit's wall clock grows
+        with whatever else shares its core; results without CPU times fall back to wall."""
+        pair = [self._option(label), self._option(ref) if ref else self.baseline()]
+        return "CPU" if all(math.isfinite(o.cpu_per_epoch()) for o in pair) else "wall"
+
+    def cost_ratio(self, label: str, ref: str | None = None) -> float:
+        """Cost per epoch of an option over ``ref``'s (default the deployed option's), on
+        :meth:`cost_basis`."""
+        basis = self.cost_basis(label, ref)
+        base = self._option(ref) if ref else self.baseline()
+        return relative_effect(self._option(label).per_epoch(basis), base.per_epoch(basis)) + 1.0
+
+    def _option(self, label: str) -> OptionResult:
+        return next(o for o in self.options if o.label == label)
 
 
 @dataclass

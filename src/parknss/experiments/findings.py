@@ -161,16 +161,17 @@ def _integrator_finding(res: AblationResult) -> Finding:
     e_vx = relative_effect(opt.mean("vx"), ref.mean("vx"))
     e_yaw = relative_effect(opt.mean("yaw"), ref.mean("yaw"))
     tie = [fl.confirms_null(e_vx, "vx"), fl.confirms_null(e_yaw, "yaw")]
-    ratio_fused = ax.cost_ratio(rk4)
-    text = (
-        f"RK4 vs {ref.label}: vx {_pct(e_vx)}, yaw {_pct(e_yaw)}; "
-        f"cost x{ratio_fused:.2f} vs fused Euler"
-    )
-    ratio_eager = math.nan
+    text = f"RK4 vs {ref.label}: vx {_pct(e_vx)}"
+    if len(opt.scores) == len(ref.scores) > 1:  # the same folds in the same order
+        paired = "/".join(f"{100 * relative_effect(a.vx, b.vx):+.1f}"
+                          for a, b in zip(opt.scores, ref.scores, strict=True))
+        text += f" (per fold {paired} %)"
+    ratio = ax.cost_ratio(rk4)
+    text += (f", yaw {_pct(e_yaw)}; cost x{ratio:.2f} vs fused Euler "
+             f"({ax.cost_basis(rk4)} per step)")
     if eager is not None:
-        ratio_eager = ax.cost_ratio(rk4) / ax.cost_ratio(eager)
-        text += f", x{ratio_eager:.2f} vs eager Euler"
-    ratio = ratio_eager if math.isfinite(ratio_eager) else ratio_fused
+        ratio = ax.cost_ratio(rk4, eager)
+        text += f", x{ratio:.2f} vs eager Euler ({ax.cost_basis(rk4, eager)} per step)"
     if ax.recipe != res.recipe:  # the floor's seeds trained with the budget's recipe
         text += f" ({ax.recipe} recipe; the floor's fits: {res.recipe})"
     return Finding(claim, f"{text}; {fl.describe()}", _null_verdict(tie, ratio > 1.5), _why(fl))

@@ -110,14 +110,16 @@ def ablation_tables(res: AblationResult) -> list[Table]:
                     beyond,
                     _r(o.wall_s(), 1),
                     _r(o.wall_per_epoch(), 3),
-                    f"x{ax.cost_ratio(o.label):.2f}" if ax.cost else "",
+                    _r(o.cpu_per_epoch(), 3),
+                    (f"x{ax.cost_ratio(o.label):.2f} ({ax.cost_basis(o.label)})"
+                     if ax.cost else ""),
                     extra,
                 ]
             )
             for lr, v in sorted(o.lr_sweep.items()):
                 sweeps.append([ax.name, o.label, lr, _r(v)])
     for u in res.unmeasured:  # a --stored-only run: the axes the store cannot build yet
-        rows.append([u.name, u.describe(), *[""] * 9])
+        rows.append([u.name, u.describe(), *[""] * 10])
     tables = [
         Table(
             f"Table III: design ablations on held-out maneuvers ({res.epochs} epochs, CV folds "
@@ -131,8 +133,9 @@ def ablation_tables(res: AblationResult) -> list[Table]:
                 "effect vx / ω_z [%]",
                 "beyond floor",
                 "wall per fit [s]",
-                "s/epoch",
-                "cost",
+                "wall s/epoch",
+                "CPU s/epoch",
+                "cost (CPU, else wall)",
                 "",
             ],
             rows,

@@ -121,7 +121,8 @@ def _num(v: Any) -> float:
 
 @dataclass
 class FoldScore:
-    """Moving-region errors of one fold: vx (km/h)², yaw (°/s)²; wall time s."""
+    """Moving-region errors of one fold: vx (km/h)², yaw (°/s)²; wall and CPU time of the
+    fit, s (CPU NaN when the result lacks it)."""
 
     vx: float
     vx_reverse: float
@@ -132,11 +133,17 @@ class FoldScore:
     best_epoch: int | None
     n_train: int
     epochs: int | None = None
+    cpu_s: float = math.nan
 
     @property
     def wall_per_epoch(self) -> float:
         """Wall clock per epoch, s (validation included); NaN without an epoch count."""
         return self.wall_s / self.epochs if self.epochs else math.nan
+
+    @property
+    def cpu_per_epoch(self) -> float:
+        """CPU time per epoch (per step of a fast fit), s; NaN without either."""
+        return self.cpu_s / self.epochs if self.epochs else math.nan
 
     @classmethod
     def from_json(cls, res: dict) -> FoldScore:
@@ -151,6 +158,7 @@ class FoldScore:
             best_epoch=res.get("best_epoch"),
             n_train=len(res["train"]),
             epochs=res.get("epochs"),
+            cpu_s=_num(res.get("cpu_s")),
         )
 
 
