@@ -134,7 +134,7 @@ def phase_rates(rows: list[dict]) -> dict[str, float]:
     a CPU time are skipped with the step before them."""
     spent: dict[str, float] = {}
     count: dict[str, int] = {}
-    before = 0.0
+    before: float | None = 0.0
     for row in rows:
         cpu = row.get("cpu_s")
         if not isinstance(cpu, int | float) or not math.isfinite(cpu):
