@@ -110,8 +110,7 @@ class AxisResult:
 
     def effect(self, label: str, channel: str) -> float:
         """Relative effect of an option against the deployed one."""
-        opt = next(o for o in self.options if o.label == label)
-        return relative_effect(opt.mean(channel), self.baseline().mean(channel))
+        return relative_effect(self._option(label).mean(channel), self.baseline().mean(channel))
 
     def best(self, channel: str) -> OptionResult:
         return min(self.options, key=lambda o: (math.isnan(o.mean(channel)), o.mean(channel)))

@@ -128,6 +128,15 @@ class FitShape:
     updates: int = 0
     samples: int = 0
 
+    @property
+    def phases(self) -> tuple[tuple[str, int], ...]:
+        """The recipe's phases in order, (name, steps), named as the fit's history rows
+        name them (:mod:`parknss.nss.recipes`): paper epochs, or a fast fit's phase-1
+        updates ("short") then its finish epochs ("full")."""
+        if self.recipe == "fast":
+            return (("short", self.updates), ("full", self.epochs))
+        return (("paper", self.epochs),)
+
 
 def fit_shape(job: Job, campaign) -> FitShape:
     """The :class:`FitShape` of a fold job (its config resolved, its fold's trials tiled)."""

@@ -206,10 +206,8 @@ def planned_fits(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> dict[str,
             key = fit_key(job.fn, job.kwargs)
             if key not in out and job.kwargs.get("model", "nss") == "nss":
                 shape = fit_shape(job, campaign)
-                phases = ((("short", shape.updates), ("full", shape.epochs))
-                          if shape.recipe == "fast" else (("paper", shape.epochs),))
                 out[key] = PlannedFit(job.name or key, shape.epochs + shape.updates,
-                                      phases, shape.engine)
+                                      shape.phases, shape.engine)
     ov = cfg.budget(quick).deployment_overrides()
     for var, job in cv_jobs(sweep.data, None, ov, list(MODEL_VARIANTS)):
         if job.kwargs["model"] == "nss":
