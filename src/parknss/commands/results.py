@@ -22,6 +22,9 @@ def register(app: typer.Typer) -> None:
     app.add_typer(results_app, name="results")
     store_opt = typer.Option(None, "--store", help="Result store folder (default: results/).")
     config_opt = typer.Option(None, "--config", help="Experiments YAML (its store.dir).")
+    from parknss.commands.results_lineage import add_commands
+
+    add_commands(results_app, store_opt, config_opt)
 
     @results_app.command("list")
     def list_cmd(
@@ -31,6 +34,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """One line per stored fit: key, name, data hash, code version, revision, times."""
         from parknss.experiments import parked
+        from parknss.experiments.lineage import accepted_versions, describe
         from parknss.experiments.store import code_version, listing, results_root
 
         root = results_root(store, config)
@@ -39,23 +43,27 @@ def register(app: typer.Typer) -> None:
         bad += bad_held
         if as_json:
             doc = {"store": str(root), "code_version": code_version(), "entries": rows,
+                   "accepted_versions": accepted_versions(root, code_version()),
                    "parked": held, "invalid": bad}
             typer.echo(json.dumps(doc, indent=2))
             return
         for line in rows + held + [f"INVALID {b}" for b in bad]:
             typer.echo(line)
-        typer.echo(f"{len(rows)} fits in {root}, {len(held)} unfinished parked (code version "
-                   f"here: {code_version()})"
+        typer.echo(f"{len(rows)} fits in {root}, {len(held)} unfinished parked; "
+                   f"{describe(root, code_version())}"
                    + (f"; {len(bad)} invalid files (parknss results verify)" if bad else ""))
 
     @results_app.command("verify")
     def verify_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:
-        """Check every stored file: it parses and its key matches its contents and path;
-        every parked state reads whole and sits under its own key."""
+        """Check every stored file: it parses, its key matches its contents and path, its
+        content matches its digest; every parked state reads whole and sits under its own
+        key; the lineage reads."""
         from parknss.experiments import parked
-        from parknss.experiments.store import listing, results_root
+        from parknss.experiments.lineage import describe, read_lineage
+        from parknss.experiments.store import code_version, listing, results_root
 
         root = results_root(store, config)
+        read_lineage(root)
         rows, bad = listing(root)
         held, bad_held = parked.listing(root)
         bad += bad_held
@@ -65,7 +73,12 @@ def register(app: typer.Typer) -> None:
             raise ParknssError(f"{len(bad)} of {len(rows) + len(held) + len(bad)} files in "
                                f"{root} are not valid store entries or parked states, first: "
                                f"{bad[0]}")
-        typer.echo(f"{len(rows)} fits and {len(held)} parked states in {root}: all valid")
+        typer.echo(f"{len(rows)} fits and {len(held)} parked states in {root}: all valid; "
+                   f"{describe(root, code_version())}")
+        stale = sum(" stale " in r for r in rows)
+        if stale:
+            typer.echo(f"{stale} fits are of a code version not accepted here (stale): "
+                       "parknss results migrate checks whether this code computes their numbers")
 
     @results_app.command("park")
     def park_cmd(

@@ -48,6 +48,9 @@ INFLIGHT = "inflight"
 """The store's folder of parked states: ``<store>/inflight/<store key>/``."""
 JOB_FILE = "job.json"
 """The label of a state folder: ``{"fn", "kwargs", "name", "key"}`` of the job it fits."""
+SITTINGS = "sittings.json"
+"""The sittings of a state folder's fit, oldest first (:func:`add_sitting`): carried with
+the state when it is parked and seeded, and recorded in the stored result's provenance."""
 COPY_TRIES = 3
 """Copies of a state that a checkpoint write tore before :func:`copy_state` gives up."""
 
@@ -129,6 +132,8 @@ def copy_state(src: Path, dst: Path) -> StateInfo:
         tmp.mkdir()
         for name in (JOB_FILE, TENSORS, META):
             shutil.copyfile(src / name, tmp / name)
+        if (src / SITTINGS).is_file():
+            shutil.copyfile(src / SITTINGS, tmp / SITTINGS)
         try:
             info = read_info(tmp)
         except CheckpointError as exc:
@@ -164,11 +169,31 @@ def seed(root: Path, key: str, state_dir: str | Path) -> StateInfo | None:
     if own is not None and own >= info.step:
         return None
     dst.mkdir(parents=True, exist_ok=True)
-    for name in (TENSORS, META):  # the tensors first: the JSON names their hash
+    for name in (TENSORS, META, SITTINGS):  # the tensors first: the JSON names their hash
+        if name == SITTINGS and not (src / name).is_file():
+            continue
         tmp = dst / (name + ".tmp")
         shutil.copyfile(src / name, tmp)
         tmp.replace(dst / name)
     return info
+
+
+def read_sittings(folder: str | Path) -> list[dict]:
+    """The sittings recorded in the state ``folder`` (empty: none, or unreadable)."""
+    try:
+        doc = json.loads((Path(folder) / SITTINGS).read_text())
+    except (OSError, ValueError):
+        return []
+    return [s for s in doc if isinstance(s, dict)] if isinstance(doc, list) else []
+
+
+def add_sitting(folder: str | Path, sitting: dict) -> None:
+    """Append ``sitting`` (where and with what this sitting of the fit runs) to the
+    state ``folder``'s :data:`SITTINGS`, with the step it starts from."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = [*read_sittings(folder), {**sitting, "from_step": read_step(folder) or 0}]
+    atomic_write_text(folder / SITTINGS, json.dumps(rows, indent=1, sort_keys=True) + "\n")
 
 
 def unpark(root: Path, key: str) -> bool:

@@ -221,6 +221,28 @@ class Provenance:
     finished_utc: str
     data: str | None
     config: dict | None
+    sittings: list[dict] | None = None
+    """Every sitting of a fit resumed from its training state, oldest first: machine,
+    Python, torch, git revision and the step it started from (:func:`sittings`); None
+    for fits stored before sittings were recorded."""
+
+
+def content_digest(doc: Mapping[str, Any]) -> str:
+    """The SHA-256 of a store file's JSON ``doc`` less its ``digest`` field (key, job,
+    data hash, code version, result with every score, provenance), canonical JSON."""
+    body = {k: v for k, v in doc.items() if k != "digest"}
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def digest_problem(doc: Mapping[str, Any]) -> str | None:
+    """Why the file ``doc`` fails its content digest (None: it matches)."""
+    got = doc.get("digest")
+    if got is None:
+        return "no content digest (stored before digests; parknss results seal adds it)"
+    if got != content_digest(doc):
+        return "its content does not match its digest (edited after it was stored)"
+    return None
 
 
 @dataclass
@@ -237,8 +259,10 @@ class StoreEntry:
     provenance: Provenance
 
     def to_json(self) -> dict:
+        """The file's JSON, with its :func:`content_digest`."""
         doc = asdict(self)
         doc["job"] = {"fn": doc.pop("fn"), "kwargs": doc.pop("kwargs"), "name": doc.pop("name")}
+        doc["digest"] = content_digest(doc)
         return doc
 
     @classmethod
@@ -250,6 +274,26 @@ class StoreEntry:
 
     def expected_key(self) -> str:
         return store_key(self.fn, self.kwargs, self.data_hash, self.code_version)
+
+
+def this_sitting(revision: str, code: str) -> dict:
+    """Where and with what this process fits: machine, Python, torch, git revision (a
+    sitting of :attr:`Provenance.sittings`)."""
+    import torch
+
+    return {"machine": asdict(Machine.here()), "python": platform.python_version(),
+            "torch": torch.__version__, "git_revision": revision.removesuffix("+dirty"),
+            "dirty": revision.endswith("+dirty"), "code_version": code,
+            "started_utc": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")}
+
+
+def sittings(state_dir: str | Path | None) -> list[dict] | None:
+    """The sittings recorded in a fit's state folder (None: the job has none)."""
+    if state_dir is None:
+        return None
+    from parknss.experiments import parked
+
+    return parked.read_sittings(state_dir) or None
 
 
 def _warn(msg: str) -> None:
@@ -276,8 +320,20 @@ class ResultStore:
         self.read, self.write, self.log = read, write, log
         self.fit_missing = fit_missing
         self.code = code_version()
+        self._codes: tuple[str, list[str]] | None = None
         self._data_hashes: dict[str | None, str] = {}
         self._revision: str | None = None
+
+    @property
+    def codes(self) -> list[str]:
+        """The code versions whose entries answer a job: this checkout's (:attr:`code`),
+        then those the lineage records equivalent to it
+        (:mod:`parknss.experiments.lineage`); read once per code."""
+        if self._codes is None or self._codes[0] != self.code:
+            from parknss.experiments.lineage import accepted_versions
+
+            self._codes = (self.code, accepted_versions(self.root, self.code))
+        return self._codes[1]
 
     def data_hash(self, data: str | None) -> str:
         """The data hash of the campaign ``data`` (None: the default), computed once."""
@@ -287,11 +343,16 @@ class ResultStore:
             self._data_hashes[data] = load_campaign(data).data_hash()
         return self._data_hashes[data]
 
-    def entry_key(self, job: Job) -> tuple[str, dict, str]:
-        """(key, key arguments, data hash) of ``job``."""
+    def entry_key(self, job: Job, code: str | None = None) -> tuple[str, dict, str]:
+        """(key, key arguments, data hash) of ``job`` under code version ``code`` (None:
+        this checkout's)."""
         kw = key_kwargs(bound_kwargs(job.fn, job.kwargs))
         dh = self.data_hash(job.kwargs.get("data"))
-        return store_key(job.fn, kw, dh, self.code), kw, dh
+        return store_key(job.fn, kw, dh, code or self.code), kw, dh
+
+    def accepted_keys(self, job: Job) -> list[str]:
+        """The keys of ``job`` under every accepted code version (:attr:`codes`)."""
+        return [self.entry_key(job, c)[0] for c in self.codes]
 
     def path(self, job: Job) -> Path:
         return self.root / short_name(job.fn) / f"{self.entry_key(job)[0]}.json"
@@ -320,19 +381,24 @@ class ResultStore:
 
         jobs = [job] + ([Job(ALIASES[job.fn][0], job.kwargs, job.name)]
                         if job.fn in ALIASES else [])
-        steps = [parked.read_step(parked.parked_dir(self.root, self.entry_key(j)[0]))
-                 for j in jobs]
+        steps = [parked.read_step(parked.parked_dir(self.root, k))
+                 for j in jobs for k in self.accepted_keys(j)]
         return max((s for s in steps if s is not None), default=0)
 
     def _get(self, job: Job) -> tuple[bool, Any]:
+        """The entry of ``job`` under the first accepted code version that has one."""
         if not self.read:
             return False, None
-        key = self.entry_key(job)[0]
-        p = self.root / short_name(job.fn) / f"{key}.json"
-        if not p.is_file():
-            return False, None
+        for key in self.accepted_keys(job):
+            p = self.root / short_name(job.fn) / f"{key}.json"
+            if p.is_file():
+                return self._read(p, key)
+        return False, None
+
+    def _read(self, p: Path, key: str) -> tuple[bool, Any]:
         try:
-            entry = StoreEntry.from_json(json.loads(p.read_text()))
+            doc = json.loads(p.read_text())
+            entry = StoreEntry.from_json(doc)
             ok = entry.key == key == entry.expected_key()
         except (OSError, ValueError, KeyError, TypeError) as exc:
             self.log(f"{p}: not a store entry ({exc.__class__.__name__}); ignored, refitting")
@@ -340,25 +406,32 @@ class ResultStore:
         if not ok:
             self.log(f"{p}: its contents do not match its key; ignored, refitting")
             return False, None
+        if "digest" in doc and digest_problem(doc) is not None:
+            self.log(f"{p}: {digest_problem(doc)}; ignored, refitting")
+            return False, None
         return True, entry.result
+
+    def _git(self) -> str:
+        if self._revision is None:
+            from parknss.outputs import git_revision
+
+            self._revision = git_revision()
+        return self._revision
 
     def put(self, job: Job, result: Any, wall_s: float, cpu_s: float) -> None:
         if not self.write:
             return
         key, kw, dh = self.entry_key(job)
-        if self._revision is None:
-            from parknss.outputs import git_revision
-
-            self._revision = git_revision()
         import torch
 
-        rev = self._revision
+        rev = self._git()
         prov = Provenance(
             git_revision=rev.removesuffix("+dirty"), dirty=rev.endswith("+dirty"),
             machine=Machine.here(), python=platform.python_version(), torch=torch.__version__,
             wall_s=round(wall_s, 3), cpu_s=round(cpu_s, 3),
             finished_utc=datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
             data=job.kwargs.get("data"), config=_nss_config(job.kwargs),
+            sittings=sittings(job.kwargs.get("state_dir")),
         )
         entry = StoreEntry(key, job.fn, kw, job.name, dh, self.code, result, prov)
         p = self.root / short_name(job.fn) / f"{key}.json"
@@ -368,7 +441,7 @@ class ResultStore:
         tmp.replace(p)
         from parknss.experiments import parked
 
-        if parked.unpark(self.root, key):
+        if any([parked.unpark(self.root, k) for k in self.accepted_keys(job)]):
             self.log(f"{job.name or key}: stored; its parked state is removed")
 
     def resume(self, job: Job) -> None:
@@ -382,7 +455,12 @@ class ResultStore:
 
         key = self.entry_key(job)[0]
         parked.label(state_dir, job.fn, job.kwargs, job.name, key)
-        info = parked.seed(self.root, key, state_dir) if self.read else None
+        info = None
+        for k in self.accepted_keys(job) if self.read else []:
+            info = parked.seed(self.root, k, state_dir)
+            if info is not None:
+                break
+        parked.add_sitting(state_dir, this_sitting(self._git(), self.code))
         if info is not None:
             cpu = "" if info.cpu_s is None else f", {info.cpu_s:.0f} CPU s"
             self.log(f"{job.name or key}: resumes from its parked state (step {info.step}{cpu})")
@@ -419,18 +497,28 @@ def open_store(option: str | Path | None, cfg, quick: bool, refit: bool,
                        fit_missing=not stored_only)
 
 
+NOT_ENTRIES: tuple[str, ...] = ("inflight", "lineage")
+"""Folders of the store that hold no entries (parked states, the lineage)."""
+
+
 def entries(root: str | Path) -> list[tuple[Path, StoreEntry | str]]:
     """Every ``*.json`` under the store ``root`` with its entry, or why it is not a valid
-    one (does not parse, lacks a field, its key does not match its contents or path)."""
+    one (does not parse, lacks a field, its key does not match its contents or path, its
+    content does not match its digest or it has none)."""
     root = Path(root)
     out: list[tuple[Path, StoreEntry | str]] = []
     for p in sorted(root.glob("*/*.json")):
+        if p.parent.name in NOT_ENTRIES:
+            continue
         try:
-            e = StoreEntry.from_json(json.loads(p.read_text()))
+            doc = json.loads(p.read_text())
+            e = StoreEntry.from_json(doc)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             out.append((p, f"not a store entry ({exc.__class__.__name__}: {exc})"))
             continue
-        if e.key != e.expected_key():
+        if digest_problem(doc) is not None:
+            out.append((p, str(digest_problem(doc))))
+        elif e.key != e.expected_key():
             out.append((p, f"key {e.key} does not match its contents ({e.expected_key()})"))
         elif p.stem != e.key or p.parent.name != short_name(e.fn):
             out.append((p, f"misplaced: belongs at {short_name(e.fn)}/{e.key}.json"))
@@ -464,17 +552,50 @@ def fit_cpu_s(fn: str, result: Any) -> float | None:
     return float(cpu) if isinstance(cpu, int | float) and not isinstance(cpu, bool) else None
 
 
+def seal(root: str | Path) -> tuple[int, int]:
+    """Add its :func:`content_digest` to every entry of the store ``root`` that has none
+    (the entries stored before digests existed; a one-time migration) and whose key
+    matches its contents; (sealed, already sealed). Files that are not valid entries are
+    left alone (``parknss results verify`` names them)."""
+    done = already = 0
+    for p in sorted(Path(root).glob("*/*.json")):
+        if p.parent.name in NOT_ENTRIES:
+            continue
+        try:
+            doc = json.loads(p.read_text())
+            e = StoreEntry.from_json(doc)
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if "digest" in doc:
+            already += 1
+            continue
+        if e.key != e.expected_key():
+            continue
+        doc["digest"] = content_digest(doc)
+        tmp = p.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
+        tmp.replace(p)
+        done += 1
+    return done, already
+
+
 def listing(root: Path) -> tuple[list[str], list[str]]:
     """(one line per valid entry, one line per invalid file) of the store at ``root``;
-    an entry of another code version than this checkout's is marked ``stale``."""
+    an entry of this checkout's code version is ``current``, one of a version the
+    lineage accepts ``lineage`` (:mod:`parknss.experiments.lineage`), any other
+    ``stale``."""
+    from parknss.experiments.lineage import accepted_versions
+
     current = code_version()
+    accepted = accepted_versions(root, current)
     rows, bad = [], []
     for p, e in entries(root):
         if isinstance(e, str):
             bad.append(f"{p.relative_to(root)}: {e}")
             continue
         pv = e.provenance
-        state = "current" if e.code_version == current else "stale"
+        state = ("current" if e.code_version == current
+                 else "lineage" if e.code_version in accepted else "stale")
         total = fit_cpu_s(e.fn, e.result)
         fit = f" (fit {total:.0f} s)" if total is not None and total > pv.cpu_s + 1 else ""
         rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
