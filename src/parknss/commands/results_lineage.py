@@ -11,6 +11,8 @@ from pathlib import Path
 
 import typer
 
+from parknss.errors import ParknssError
+
 
 def add_commands(results_app: typer.Typer, store_opt, config_opt) -> None:
     @results_app.command("canary")
@@ -63,6 +65,10 @@ def add_commands(results_app: typer.Typer, store_opt, config_opt) -> None:
         m = migrate(root, code_version(), canary_record(run_canary(), Machine.here()))
         for line in m.lines():
             typer.echo(line)
+        if m.differs and not m.equivalent:
+            raise ParknssError(f"the canary of code {m.version} differs from every recorded "
+                               "one on this CPU: this code changes the numbers, the stored "
+                               "fits of other versions stay stale (recorded in lineage/)")
 
     @results_app.command("seal")
     def seal_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:

@@ -178,6 +178,8 @@ class Migration:
     equivalent: list[str]
     differs: dict[str, str]
     accepted: list[str]
+    own: list[str] = field(default_factory=list)
+    """Digests recorded for this same version on this CPU before (a rerun)."""
 
     def lines(self) -> list[str]:
         c = self.canary
@@ -187,7 +189,10 @@ class Migration:
                 for v in self.equivalent]
         out += [f"  differs from the canary of {v} ({d}): its fits stay stale"
                 for v, d in self.differs.items()]
-        if not self.equivalent and not self.differs:
+        out += [f"  this version's canary recorded before on this CPU: {d} "
+                f"({'equal' if d == c.digest else 'DIFFERS: not deterministic here?'})"
+                for d in self.own]
+        if not self.equivalent and not self.differs and not self.own:
             out.append(f"  no other version has a canary recorded on {c.cpu}: nothing "
                        "to compare with (run this on such a machine)")
         out.append("the store accepts fits of code versions: " + ", ".join(self.accepted))
@@ -200,6 +205,7 @@ def migrate(root: str | Path, version: str, can: CanaryRecord) -> Migration:
     and canary definition has the same digest."""
     records = read_lineage(root)
     rec = records.get(version) or VersionRecord(version)
+    own = sorted({c.digest for c in rec.canaries if c.cpu == can.cpu and c.spec == can.spec})
     add_canary(rec, can)
     equal, differs = [], {}
     for other in records.values():
@@ -214,7 +220,7 @@ def migrate(root: str | Path, version: str, can: CanaryRecord) -> Migration:
         if not any(e.version == v and e.cpu == can.cpu for e in rec.equivalent_to):
             rec.equivalent_to.append(Equivalence(v, can.cpu, can.digest, now_utc()))
     write_record(root, rec)
-    return Migration(version, can, equal, differs, accepted_versions(root, version))
+    return Migration(version, can, equal, differs, accepted_versions(root, version), own)
 
 
 def describe(root: str | Path, current: str) -> str:
