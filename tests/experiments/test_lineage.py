@@ -92,3 +92,16 @@ def test_a_resumed_fit_records_every_sitting(tmp_path):
     rows = e.provenance.sittings
     assert [r["from_step"] for r in rows] == [0, 7]
     assert {"machine", "python", "torch", "git_revision", "code_version"} <= set(rows[0])
+
+
+def test_migrate_command_exits_2_when_the_numbers_change(tmp_path, monkeypatch, capsys):
+    from parknss.experiments import canary
+    from parknss.experiments.store import Machine
+
+    migrate(tmp_path, "v0", _can("aaa", cpu=Machine.here().cpu, spec=canary.spec_digest()))
+    for digest, rc in (("bbb", 2), ("aaa", 0)):
+        res = canary.CanaryResult(digest, {"x": digest}, canary.spec_digest(), 0.1)
+        monkeypatch.setattr(canary, "run_canary", lambda res=res: res)
+        assert main(["results", "migrate", "--store", str(tmp_path)]) == rc
+    out = capsys.readouterr().out
+    assert "differs from the canary of v0" in out and "equals the canary of v0" in out
