@@ -127,7 +127,7 @@ def test_a_torn_or_misfiled_parked_state_is_invalid_and_never_resumed(killed, tm
     parked.park_run(run_a, root)
     assert main(["results", "verify", "--store", str(root)]) == 0
     assert "0 fits and 1 parked states" in capsys.readouterr().out
-    tensors = root / parked.INFLIGHT / key / train_state.TENSORS
+    tensors = train_state.tensors_path(root / parked.INFLIGHT / key)
     tensors.write_bytes(tensors.read_bytes()[:-8])
     assert parked.seed(root, key, tmp_path / "s") is None
     (path, why), = parked.parked_states(root)
@@ -147,7 +147,7 @@ def test_a_state_torn_on_every_copy_is_refused(killed, monkeypatch):
 
     def torn(src, dst):
         real(src, dst)
-        if str(dst).endswith(train_state.TENSORS):
+        if str(dst).endswith(".safetensors"):
             with open(dst, "ab") as f:
                 f.write(b"x")
 
