@@ -2,10 +2,12 @@
 
 Three small mechanisms the writers of states and artefacts share:
 
-* **Durable replacement** (:func:`write_bytes`, :func:`replace`, :func:`fsync_tree`): a
-  file is written to a temporary sibling, flushed to disk (``fsync``), renamed over its
-  target and the rename made durable by an ``fsync`` of the folder. At every instant the
-  target is the old complete file or the new complete one, after a kill or a power loss.
+* **Durable replacement** (:func:`write_bytes`, :func:`replace`, :func:`fsync_tree`,
+  :func:`exchange`): a file is written to a temporary sibling, flushed to disk
+  (``fsync``), renamed over its target and the rename made durable by an ``fsync`` of the
+  folder. At every instant the target is the old complete file or the new complete one,
+  after a kill or a power loss. A folder replaces another by an atomic exchange of the
+  two names where Linux offers it.
 * **Crash points** (:func:`crash_point`): named places inside the writers where a test
   kills the process deterministically. ``PARKNSS_CRASH_AT=NAME[:N]`` in the environment
   makes the process SIGKILL itself the N-th time (default 1) it reaches the point NAME;
@@ -111,6 +113,34 @@ def write_bytes(path: str | Path, data: bytes, crash: str | None = None) -> None
             tmp.unlink()
         raise
     fsync_dir(p.parent)
+
+
+def exchange(a: str | Path, b: str | Path) -> bool:
+    """Swap the existing paths ``a`` and ``b`` in one atomic step (Linux ``renameat2`` with
+    ``RENAME_EXCHANGE``), so that neither name is ever missing; False (nothing done) where
+    the system or the filesystem cannot, and the caller renames in two steps."""
+    fn = _renameat2()
+    if fn is None:
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+_RENAMEAT2: list = []
+
+
+def _renameat2():
+    if not _RENAMEAT2:
+        fn = None
+        with contextlib.suppress(OSError, AttributeError):
+            import ctypes
+
+            fn = ctypes.CDLL(None, use_errno=True).renameat2
+            fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                           ctypes.c_uint]
+            fn.restype = ctypes.c_int
+        _RENAMEAT2.append(fn)
+    return _RENAMEAT2[0]
 
 
 def fsync_tree(folder: str | Path) -> None:
