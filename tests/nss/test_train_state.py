@@ -4,6 +4,7 @@ ends with the weights of an uninterrupted fit, bit for bit."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import random
 import signal
@@ -54,3 +55,27 @@ def test_a_fit_killed_anywhere_resumes_to_the_uninterrupted_weights(tmp_path):
     assert res.history.crit_raw == ref.history.crit_raw
     left = sorted(p.name for p in tmp_path.iterdir())  # two generations, no temporary files
     assert left[-2:] == [train_state.META, train_state.PREV_META] and len(left) == 4
+
+
+def test_a_state_written_before_generations_resumes(tmp_path):
+    """A state of the earlier layout (``train_state.safetensors`` beside a JSON that names
+    no tensor file) resumes bit-identically, and its next write is a generation."""
+    cfg = tiny_config(train={"epochs": 6, "seed": 2, "val_every": 2, "smooth_window": 3,
+                             "checkpoint_every": 3})
+    ref = fit(TRAIN, VAL, cfg, progress=False)
+
+    def stop(e):
+        if e == 4:
+            raise KeyboardInterrupt
+
+    with contextlib.suppress(KeyboardInterrupt):
+        fit(TRAIN, VAL, cfg, progress=False, out_dir=tmp_path, on_epoch=stop)
+    meta = json.loads((tmp_path / train_state.META).read_text())
+    train_state.tensors_path(tmp_path).rename(tmp_path / train_state.TENSORS)
+    del meta["tensors"]
+    (tmp_path / train_state.META).write_text(json.dumps(meta))
+    assert not (tmp_path / train_state.PREV_META).exists()
+    res = fit(TRAIN, VAL, cfg, progress=False, out_dir=tmp_path, resume=True)
+    assert _same(res.model, ref.model)
+    newest = json.loads((tmp_path / train_state.META).read_text())
+    assert newest["epoch"] == 6 and newest["tensors"] != train_state.TENSORS

@@ -53,6 +53,8 @@ from parknss.nss.checkpoint import (
     save_model,
     sha256_file,
 )
+from parknss.nss.config import NSSConfig
+from parknss.outputs import artefact_folder
 from parknss.signals import SCHEMA_VERSION
 
 FORMAT = "parknss-chain"
@@ -68,16 +70,23 @@ MEMBERS = (META, WEIGHTS, f"{NSS_DIR}/model.json", f"{NSS_DIR}/model.safetensors
 
 
 def write_chain(folder: str | Path, chain: Chain, meta: dict) -> Path:
-    """Write ``chain`` (all three submodels, and its NSS's provenance) into ``folder``;
-    ``meta`` is the build's metadata (recorded under ``build``)."""
+    """Write ``chain`` (all three submodels, and its NSS's provenance) as the folder
+    ``folder``, whose earlier content it replaces atomically
+    (:func:`~parknss.outputs.artefact_folder`); ``meta`` is the build's metadata (recorded
+    under ``build``)."""
     out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
     missing = [c for c in CHANNELS if chain.model(c) is None]
     if missing:
         raise CheckpointError(f"{out}: a deployed chain needs all submodels; {missing} measured")
     cfg = chain.provenance.config
     if cfg is None:
         raise CheckpointError(f"{out}: the chain carries no NSS config (chain.provenance)")
+    with artefact_folder(out, overwrite=True, kind="chain") as tmp:
+        _write_chain(tmp, chain, cfg, meta)
+    return out
+
+
+def _write_chain(out: Path, chain: Chain, cfg: NSSConfig, meta: dict) -> None:
     save_model(out / NSS_DIR, chain.nss, cfg, chain.provenance.training)
     tensors, channels = {}, {}
     for ch in CHANNELS:
@@ -106,7 +115,6 @@ def write_chain(folder: str | Path, chain: Chain, meta: dict) -> Path:
     }
     atomic_write_text(out / META, json.dumps(doc, indent=2))
     write_manifest(out)
-    return out
 
 
 def _read_meta(folder: Path) -> dict:

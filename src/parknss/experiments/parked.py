@@ -142,11 +142,12 @@ def copy_state(src: Path, dst: Path) -> StateInfo:
             last = exc if isinstance(exc, CheckpointError) else CheckpointError(str(exc))
             continue
         # into dst as its newest generation: the state parked there before stays whole
-        # until the commit (train_state.commit), so a kill never loses both
+        # until the commit (train_state.commit), so a kill never loses both; then only the
+        # new one is kept (what is committed to git)
         dst.mkdir(parents=True, exist_ok=True)
         for name in (JOB_FILE, tensors):
             durable.write_bytes(dst / name, (tmp / name).read_bytes())
-        train_state.commit(dst, meta)
+        train_state.commit(dst, meta, keep_previous=False)
         shutil.rmtree(tmp, ignore_errors=True)
         info.folder = dst
         return info

@@ -135,10 +135,12 @@ def save(
     commit(folder, json.dumps(meta).encode())
 
 
-def commit(folder: Path, meta: bytes) -> None:
+def commit(folder: Path, meta: bytes, keep_previous: bool = True) -> None:
     """Make ``meta`` (a state JSON whose tensor file is already in ``folder``, durably) the
     newest generation: keep the JSON in place as :data:`PREV_META`, rename the new one over
-    :data:`META`, then delete the tensor files neither names (see the module doc)."""
+    :data:`META`, then delete the tensor files neither names (see the module doc).
+    ``keep_previous=False`` (a parked copy, committed to git): drop the previous
+    generation once the new one is in place."""
     folder = Path(folder)
     cur = folder / META
     if cur.is_file():
@@ -146,6 +148,8 @@ def commit(folder: Path, meta: bytes) -> None:
         durable.crash_point("train_state.prev")
     durable.write_bytes(cur, meta, crash="train_state.meta_tmp")
     durable.crash_point("train_state.meta")
+    if not keep_previous:
+        (folder / PREV_META).unlink(missing_ok=True)
     keep = set()
     for name in (META, PREV_META):
         try:
