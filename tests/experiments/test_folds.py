@@ -22,7 +22,7 @@ def test_a_fold_state_killed_anywhere_resumes_to_the_uninterrupted_weights(tiny_
     state = tmp_path / "state"
     rng = random.Random(1)
     kills: list[tuple[str | None, float | None]] = []
-    for crash in KILL_SCHEDULE:
+    for crash in KILL_SCHEDULE:  # 15 inside the write, each followed by one at random
         kills.append((crash, None))
         if len(kills) % 2:
             kills.append((None, rng.uniform(0.05, 0.2)))

@@ -36,7 +36,7 @@ def test_a_fit_killed_anywhere_resumes_to_the_uninterrupted_weights(tmp_path):
 
     rng = random.Random(0)
     kills: list[tuple[str | None, float | None]] = []
-    for crash in KILL_SCHEDULE:  # 15 inside the write, 8 at random instants between
+    for crash in KILL_SCHEDULE:  # 15 inside the write, each followed by one at random
         kills.append((crash, None))
         if len(kills) % 2:
             kills.append((None, rng.uniform(0.01, 0.06)))
