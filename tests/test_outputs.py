@@ -135,6 +135,38 @@ def test_crash_between_the_renames_puts_the_old_artefact_back(tmp_path):
     assert _leftovers(tmp_path) == []
 
 
+def test_an_artefact_replaced_and_killed_anywhere_is_always_whole(tmp_path):
+    """A model folder saved over and over (``save_model`` through :func:`artefact_folder`)
+    and SIGKILLed at the crash point after the flush and at random instants: ``out``
+    loads right after every kill, no tidying first, as the one model or the other (the
+    new folder is exchanged into place in one step)."""
+    import random
+    import signal
+
+    import torch
+
+    from helpers.kills import run_killed
+    from helpers.synth import make_campaign, tiny_model
+    from parknss.nss.checkpoint import load_model, save_model
+
+    camp = make_campaign(60, reps=1)
+    models = [tiny_model(camp, seed=s) for s in (1, 2)]
+    out = tmp_path / "m"
+    save_model(out, *models[0])
+
+    def body():
+        for i in range(10000):
+            save_model(out, *models[i % 2])
+
+    rng = random.Random(0)
+    kills = [("artefact.tmp:1", None), ("artefact.tmp:2", None)]
+    kills += [(None, rng.uniform(0.0, 0.3)) for _ in range(10)]
+    for crash, after in kills:
+        assert run_killed(body, crash, after) == signal.SIGKILL
+        w = load_model(out).model.state_net[0].weight
+        assert any(torch.equal(w, m.state_net[0].weight) for m, _ in models)
+
+
 def test_refuses_a_file_and_the_working_directory(tmp_path, monkeypatch):
     f = tmp_path / "f"
     f.write_text("x")

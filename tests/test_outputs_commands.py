@@ -161,5 +161,6 @@ def test_train_refuses_an_earlier_run_overwrites_and_resumes(tmp_path, capsys, m
     assert main([*base, "--epochs", "2", "--seed", "2", "--overwrite"]) == 0
     meta = json.loads(model.read_text())
     assert meta["config"]["train"]["seed"] == 2
-    assert sorted(p.name for p in model.parent.iterdir()) == ["model.json", "model.safetensors"]
+    assert sorted(p.name for p in model.parent.iterdir()) == [
+        "SHA256SUMS", "model.json", "model.safetensors"]
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []

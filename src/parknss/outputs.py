@@ -7,15 +7,21 @@ it through :func:`artefact_folder`::
         write_campaign(campaign, tmp)          # everything goes into tmp
 
 The writer fills a fresh temporary sibling ``.<name>.tmp-<pid>``; only when it returns
-normally is that folder renamed into place as ``out``. A writer that fails (or is
+normally is that folder flushed to disk (every file and folder ``fsync``ed,
+:func:`parknss.durable.fsync_tree`) and renamed into place as ``out`` (the rename flushed
+too), so that even a power loss leaves the old or the new artefact, never a renamed
+folder of empty files. A writer that fails (or is
 interrupted) leaves ``out`` as it was and the temporary folder deleted; one that is killed
 leaves ``out`` as it was and a stale temporary folder, which the next writer of ``out``
 removes. An ``out`` that already holds something is refused with a one-line
-:class:`OutputExistsError` unless ``overwrite=True``; then the old folder is renamed away
-(``.<name>.old-<pid>``), the new one renamed in and only then the old one deleted, so a
-crash at any point leaves either the old or the new artefact whole (a crash between the
-two renames leaves the old one under its ``.old`` name; the next writer of ``out`` puts it
-back before it looks at ``out``).
+:class:`OutputExistsError` unless ``overwrite=True``; then the new folder and the old one
+swap names in one atomic step (Linux ``renameat2(RENAME_EXCHANGE)``,
+:func:`parknss.durable.exchange`) and the old one, now under the temporary name, is
+deleted: ``out`` is the old or the new artefact at every instant. Where the exchange is
+not available, the old folder is renamed away (``.<name>.old-<pid>``), the new one renamed
+in and only then the old one deleted (a crash between the two renames leaves the old one
+under its ``.old`` name; the next writer of ``out`` puts it back before it looks at
+``out``).
 
 Run folders
 -----------
@@ -67,6 +73,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from parknss import durable
 from parknss.errors import ParknssError
 
 MARKERS: tuple[tuple[str, str], ...] = (
@@ -212,10 +219,17 @@ def artefact_folder(out: str | Path, *, overwrite: bool, kind: str) -> Iterator[
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     try:
+        durable.fsync_tree(tmp)
+        durable.crash_point("artefact.tmp")
         check_writable(out, overwrite=overwrite, kind=kind)
         if describe_contents(out) is None:
             _remove(out)  # absent, or an empty folder: nothing to keep
             os.replace(tmp, out)
+            durable.fsync_dir(parent)
+            return
+        if durable.exchange(tmp, out):  # one atomic step: out is never missing
+            durable.fsync_dir(parent)
+            shutil.rmtree(tmp, ignore_errors=True)  # now the old artefact
             return
         _remove(old)
         os.replace(out, old)
@@ -224,6 +238,7 @@ def artefact_folder(out: str | Path, *, overwrite: bool, kind: str) -> Iterator[
         except BaseException:
             os.replace(old, out)
             raise
+        durable.fsync_dir(parent)
         shutil.rmtree(old, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -236,14 +251,15 @@ def artefact_folder(out: str | Path, *, overwrite: bool, kind: str) -> Iterator[
 @contextlib.contextmanager
 def atomic_file(path: str | Path) -> Iterator[Path]:
     """Yield a temporary sibling of ``path`` (``.<stem>.tmp-<pid><suffix>``: the suffix
-    kept for writers that read the format from it) to write; rename it over ``path`` on
-    normal exit, delete it if the body raises. ``path``'s folder is created."""
+    kept for writers that read the format from it) to write; flush it and rename it over
+    ``path`` on normal exit (:func:`parknss.durable.replace`), delete it if the body
+    raises. ``path``'s folder is created."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(f".{p.stem}.tmp-{os.getpid()}{p.suffix}")
     try:
         yield tmp
-        os.replace(tmp, p)
+        durable.replace(tmp, p)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()

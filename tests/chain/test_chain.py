@@ -28,6 +28,7 @@ from parknss.chain import (
 )
 from parknss.chain.realtime import NumpyNSS, RealtimeChain
 from parknss.chain.score import make_chain
+from parknss.durable import write_manifest
 from parknss.errors import CheckpointError
 from parknss.plant import Commands, Plant
 
@@ -184,11 +185,14 @@ def _corrupt(tmp_path, folder, how):
         (bad / "chain.json").write_text(json.dumps(doc))
     elif how == "no_folder":
         shutil.rmtree(bad)
+    if how not in ("missing_json", "no_folder"):  # reach the checks behind the manifests
+        write_manifest(bad / "nss")
+        write_manifest(bad)
     return bad
 
 
 @pytest.mark.parametrize("how,msg", [
-    ("missing_json", "chain file not found"),
+    ("missing_json", "chain.json: listed in SHA256SUMS but missing"),
     ("malformed", "malformed JSON"),
     ("hash", "SHA-256 mismatch"),
     ("shapes", "has shape"),

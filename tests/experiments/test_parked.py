@@ -81,6 +81,9 @@ def test_a_killed_fit_parks_and_finishes_elsewhere_as_if_never_stopped(killed, t
     outcomes = parked.park_run(run_a, root)
     assert [o.parked.step for o in outcomes] == [2]
     assert (root / parked.INFLIGHT / key / train_state.META).is_file()
+    there = root / parked.INFLIGHT / key  # one generation, what git carries
+    assert sorted(p.name for p in there.iterdir()) == sorted(
+        [parked.JOB_FILE, train_state.META, train_state.tensors_path(there).name])
     assert parked.listing(root) == ([f"inflight/{key}  {outcomes[0].parked.line()}  "
                                      "(unfinished)"], [])
     # parking again the same state adds nothing
@@ -127,7 +130,7 @@ def test_a_torn_or_misfiled_parked_state_is_invalid_and_never_resumed(killed, tm
     parked.park_run(run_a, root)
     assert main(["results", "verify", "--store", str(root)]) == 0
     assert "0 fits and 1 parked states" in capsys.readouterr().out
-    tensors = root / parked.INFLIGHT / key / train_state.TENSORS
+    tensors = train_state.tensors_path(root / parked.INFLIGHT / key)
     tensors.write_bytes(tensors.read_bytes()[:-8])
     assert parked.seed(root, key, tmp_path / "s") is None
     (path, why), = parked.parked_states(root)
@@ -147,7 +150,7 @@ def test_a_state_torn_on_every_copy_is_refused(killed, monkeypatch):
 
     def torn(src, dst):
         real(src, dst)
-        if str(dst).endswith(train_state.TENSORS):
+        if str(dst).endswith(".safetensors"):
             with open(dst, "ab") as f:
                 f.write(b"x")
 

@@ -1,7 +1,9 @@
-"""The model artefact: round trip, one-line refusals, safetensors only (nothing unpickled)."""
+"""The model artefact: round trip, one-line refusals, safetensors only (nothing unpickled),
+the SHA256SUMS manifest, checks of the safetensors header before anything is allocated."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import struct
 
@@ -10,8 +12,9 @@ import pytest
 import torch
 
 from helpers.synth import make_campaign, tiny_model
+from parknss.durable import MANIFEST, write_manifest
 from parknss.errors import CheckpointError
-from parknss.nss.checkpoint import META, WEIGHTS, load_model, save_model
+from parknss.nss.checkpoint import MAX_LAYERS, MAX_UNITS, META, WEIGHTS, load_model, save_model
 from parknss.nss.predict import predict_campaign, predict_trials
 
 CAMP = make_campaign(120, reps=1)
@@ -24,11 +27,24 @@ def saved(tmp_path):
     return tmp_path / "m", m, cfg
 
 
-def _edit(folder, fn):
+def _edit(folder, fn, reseal=True):
+    """Edit model.json; ``reseal``: and rewrite the manifest (as a careful forger would),
+    so that the checks behind it are reached."""
     p = folder / META
     doc = json.loads(p.read_text())
     fn(doc)
     p.write_text(json.dumps(doc))
+    if reseal:
+        write_manifest(folder)
+
+
+def _set_weights(folder, tensors):
+    """Replace the weights, record their hash in model.json and reseal the manifest."""
+    from safetensors.torch import save_file
+
+    save_file(tensors, str(folder / WEIGHTS))
+    sha = hashlib.sha256((folder / WEIGHTS).read_bytes()).hexdigest()
+    _edit(folder, lambda d: d["weights"].__setitem__("sha256", sha))
 
 
 def _refused(path, match) -> str:
@@ -76,7 +92,7 @@ def test_missing_folder_and_files(saved, tmp_path):
     folder, _, _ = saved
     _refused(tmp_path / "nowhere", "not found")
     (folder / WEIGHTS).unlink()
-    _refused(folder, "weights file not found")
+    _refused(folder, "model.safetensors: listed in SHA256SUMS but missing")
     (folder / META).unlink()
     _refused(folder, "not found")
 
@@ -84,12 +100,15 @@ def test_missing_folder_and_files(saved, tmp_path):
 def test_malformed_json(saved):
     folder, _, _ = saved
     (folder / META).write_text('{"format": "parknss-nss", ')
+    _refused(folder, "model.json: differs from the SHA-256")
+    write_manifest(folder)
     _refused(folder, "malformed JSON")
 
 
 def test_json_that_is_not_an_object(saved):
     folder, _, _ = saved
     (folder / META).write_text("[1, 2]")
+    write_manifest(folder)
     _refused(folder, "not a parknss NSS model")
 
 
@@ -114,16 +133,17 @@ def test_flipped_byte_and_truncation(saved):
     flipped = bytearray(good)
     flipped[len(good) // 2] ^= 0x01
     p.write_bytes(bytes(flipped))
+    _refused(folder, "model.safetensors: differs from the SHA-256")
+    write_manifest(folder)  # the manifest "fixed up": model.json's own hash still refuses
     _refused(folder, "SHA-256 mismatch")
     p.write_bytes(good[:-16])
+    write_manifest(folder)
     _refused(folder, "SHA-256 mismatch")
-    # a truncated file whose hash was "fixed up" is still refused, by the reader
-    import hashlib
-
+    # a truncated file whose hashes were all "fixed up" is still refused, by its header
     _edit(
         folder, lambda d: d["weights"].__setitem__("sha256", hashlib.sha256(good[:-16]).hexdigest())
     )
-    _refused(folder, "unreadable safetensors")
+    _refused(folder, "malformed safetensors header")
 
 
 def test_weight_of_the_wrong_shape(saved):
@@ -187,3 +207,90 @@ def test_batched_prediction_equals_one_trial_at_a_time():
             np.testing.assert_allclose(both[tr.id][ch], one[ch], rtol=0, atol=1e-12)
         assert both[tr.id]["vx"][0] == pytest.approx(tr["vx"][0], abs=1e-12)
     assert predict_trials(m, []) == {}
+
+
+def test_tampered_model_json_is_refused_by_the_manifest(saved):
+    """Issue 43: a normaliser scale edited (39 -> 3.9) was used silently."""
+    folder, _, _ = saved
+    assert (folder / MANIFEST).read_text().splitlines() == [
+        f"{hashlib.sha256((folder / n).read_bytes()).hexdigest()}  {n}" for n in (META, WEIGHTS)]
+    _edit(folder, lambda d: d["normalizer"]["channels"]["vx"].__setitem__(
+        "scale", d["normalizer"]["channels"]["vx"]["scale"] / 10), reseal=False)
+    msg = _refused(folder, "model.json: differs from the SHA-256 its SHA256SUMS records")
+    assert "refusing the artefact" in msg
+    (folder / MANIFEST).unlink()
+    _refused(folder, "no SHA256SUMS .*sha256sum")
+    (folder / MANIFEST).write_text(f"{'0' * 64}  ../../etc/passwd\n")
+    _refused(folder, "malformed line 1")
+    (folder / MANIFEST).write_text(f"{'0' * 64}  {WEIGHTS}\n")
+    _refused(folder, "does not list model.json")
+
+
+def test_weights_swapped_for_another_models_are_refused(saved, tmp_path):
+    folder, _, _ = saved
+    other, cfg = tiny_model(CAMP, seed=8)
+    save_model(tmp_path / "other", other, cfg)
+    (folder / WEIGHTS).write_bytes((tmp_path / "other" / WEIGHTS).read_bytes())
+    _refused(folder, "model.safetensors: differs from the SHA-256 its SHA256SUMS")
+
+
+@pytest.mark.parametrize("field", ["state_units", "state_layers", "output_units", "output_layers"])
+def test_a_huge_config_is_refused_before_the_model_is_built(saved, field, monkeypatch):
+    """Issue 43: 200000 units or layers built the model first (a 160 GB allocation)."""
+    import parknss.nss.checkpoint as ckpt
+
+    folder, _, _ = saved
+    monkeypatch.setattr(ckpt, "NSSModel", lambda *a, **k: pytest.fail("model built"))
+    _edit(folder, lambda d: d["config"]["model"].__setitem__(field, 200000))
+    limit = MAX_UNITS if field.endswith("units") else MAX_LAYERS
+    _refused(folder, f"model.{field} = 200000 exceeds the limit {limit}")
+
+
+def test_shapes_are_checked_from_the_header_before_loading(saved, monkeypatch):
+    import parknss.nss.checkpoint as ckpt
+
+    folder, _, _ = saved
+    monkeypatch.setattr(ckpt, "load_file", lambda *a, **k: pytest.fail("tensors loaded"))
+    _edit(folder, lambda d: d["config"]["model"].__setitem__("state_units", 16))
+    _refused(folder, "has shape")
+
+
+def test_int32_weights_are_refused(saved):
+    """Issue 43: weights stored as int32 ended in a TypeError."""
+    folder, m, _ = saved
+    _set_weights(folder, {k: v.to(torch.int32) for k, v in m.state_dict().items()})
+    _refused(folder, "is stored as I32; parknss weights are F32 or F64")
+    sd = m.state_dict()
+    first = sorted(sd)[0]
+    _set_weights(folder, {k: v.float() if k == first else v for k, v in sd.items()})
+    _refused(folder, "weights mix dtypes F32, F64")
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf")])
+def test_non_finite_weights_are_refused(saved, tmp_path, bad):
+    """Issue 43: a NaN weight made every metric null with exit 0."""
+    _, m, cfg = saved
+    with torch.no_grad():
+        m.state_net[0].weight[0, 0] = bad
+    save_model(tmp_path / "nan", m, cfg)
+    _refused(tmp_path / "nan", "weight 'state_net.0.weight' holds NaN or infinite values")
+
+
+def test_a_malformed_header_is_refused(saved):
+    folder, _, _ = saved
+    raw = (folder / WEIGHTS).read_bytes()
+    for blob in (b"\xff" * 8 + raw[8:], raw[:8] + b"[" + raw[9:], b"\x01\x00"):
+        (folder / WEIGHTS).write_bytes(blob)
+        sha = hashlib.sha256(blob).hexdigest()
+        _edit(folder, lambda d, sha=sha: d["weights"].__setitem__("sha256", sha))
+        _refused(folder, "malformed safetensors header")
+
+
+def test_save_over_an_existing_model_replaces_it_whole(saved):
+    folder, _, _ = saved
+    other, cfg = tiny_model(CAMP, seed=9)
+    (folder / "stray.txt").write_text("old")
+    save_model(folder, other, cfg)
+    assert sorted(p.name for p in folder.iterdir()) == [MANIFEST, META, WEIGHTS]
+    assert [p.name for p in folder.parent.iterdir() if p.name.startswith(".")] == []
+    assert torch.equal(load_model(folder).model.state_net[0].weight, other.state_net[0].weight)

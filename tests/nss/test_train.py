@@ -109,17 +109,33 @@ def test_resume_refuses_another_config_or_data(tmp_path):
     _fit(_cfg(2, seed=0, checkpoint_every=1, threads=2), out_dir=tmp_path, resume=True)
 
 
-def test_resume_refuses_a_corrupt_state(tmp_path):
-    _fit(_cfg(2, seed=0, checkpoint_every=1), out_dir=tmp_path)
-    p = tmp_path / train_state.TENSORS
+def _flip(p):
     data = bytearray(p.read_bytes())
     data[-3] ^= 0xFF
     p.write_bytes(bytes(data))
+
+
+def test_resume_uses_the_previous_generation_and_says_so_or_refuses(tmp_path, capsys):
+    """A newest state damaged on disk: the previous generation (step 1) resumes, with a
+    note; both damaged, or the JSON too: one-line refusals naming what is wrong."""
+    cfg = _cfg(2, seed=0, checkpoint_every=1)
+    ref = _fit(cfg)
+    _fit(cfg, out_dir=tmp_path)
+    assert (tmp_path / train_state.PREV_META).is_file()
+    assert len(list(tmp_path.glob("train_state.*.safetensors"))) == 2  # two generations
+    _flip(train_state.tensors_path(tmp_path))
+    seen = []
+    res = _fit(cfg, out_dir=tmp_path, resume=True, on_epoch=seen.append)
+    assert seen == [2] and _same_weights(res.model, ref.model)  # from the step-1 state
+    err = capsys.readouterr().err
+    assert "corrupt or truncated" in err and "resuming from the previous one, step 1" in err
+    for p in tmp_path.glob("train_state.*.safetensors"):  # now both generations
+        _flip(p)
     with pytest.raises(CheckpointError, match="corrupt or truncated"):
-        _fit(_cfg(2, seed=0, checkpoint_every=1), out_dir=tmp_path, resume=True)
+        _fit(cfg, out_dir=tmp_path, resume=True)
     (tmp_path / train_state.META).write_text("{not json")
     with pytest.raises(CheckpointError, match="unreadable"):
-        _fit(_cfg(2, seed=0, checkpoint_every=1), out_dir=tmp_path, resume=True)
+        _fit(cfg, out_dir=tmp_path, resume=True)
 
 
 def test_cosine_schedule():

@@ -7,12 +7,19 @@ Layout::
                             the NSS's SHA-256, and the build's metadata (selection,
                             co-tuning, data hash, timings)
     actuators.safetensors   the three submodels' weights ("drive.k", "brake.net.0.weight")
-    nss/                    the frozen NSS in its own format (parknss.nss.checkpoint)
+    nss/                    the frozen NSS in its own format (parknss.nss.checkpoint),
+                            with its own SHA256SUMS
+    SHA256SUMS              the SHA-256 of every other file, nss/ included
+                            (parknss.durable), written last
 
 :func:`read_chain` refuses, with one-line :class:`~parknss.errors.CheckpointError`s, a
-missing folder or file, malformed JSON, another format or schema version, a missing
-channel, a hash mismatch (corrupt or truncated weights, or an NSS swapped underneath),
-and weights whose names or shapes do not fit the recorded candidates.
+missing folder or file, a file that differs from the manifest (an edited chain.json or
+nss/model.json, swapped weights), malformed JSON, another format or schema version, a
+missing channel, a candidate whose sizes exceed the limits (:data:`MAX_LAGS`,
+:data:`~parknss.nss.checkpoint.MAX_UNITS`, :data:`~parknss.nss.checkpoint.MAX_LAYERS`),
+a hash mismatch (corrupt or truncated weights, or an NSS swapped underneath), weights
+whose dtypes, names or shapes (read from the safetensors header before any tensor is
+loaded) do not fit the recorded candidates, and weights that are not finite.
 """
 
 from __future__ import annotations
@@ -30,15 +37,24 @@ from parknss.actuators.envelopes import Envelope
 from parknss.actuators.models import ActuatorModel, Scaling
 from parknss.actuators.spec import CHANNELS, CandidateSpec
 from parknss.chain.model import Chain, NSSProvenance
+from parknss.durable import MANIFEST, verify_manifest, write_manifest
 from parknss.errors import CheckpointError, ConfigError
 from parknss.nss.checkpoint import (
+    MAX_LAYERS,
+    MAX_UNITS,
     atomic_save_tensors,
     atomic_write_text,
+    check_finite,
+    check_float_dtypes,
+    check_size,
     git_revision,
     load_model,
+    safetensors_header,
     save_model,
     sha256_file,
 )
+from parknss.nss.config import NSSConfig
+from parknss.outputs import artefact_folder
 from parknss.signals import SCHEMA_VERSION
 
 FORMAT = "parknss-chain"
@@ -46,19 +62,31 @@ FORMAT_VERSION = 1
 META = "chain.json"
 WEIGHTS = "actuators.safetensors"
 NSS_DIR = "nss"
+MAX_LAGS = 1000
+"""The most lagged command samples a loaded NARX candidate may have (10 s; the paper's 5)."""
+MEMBERS = (META, WEIGHTS, f"{NSS_DIR}/model.json", f"{NSS_DIR}/model.safetensors",
+           f"{NSS_DIR}/{MANIFEST}")
+"""The files a chain is made of, each listed in its manifest."""
 
 
 def write_chain(folder: str | Path, chain: Chain, meta: dict) -> Path:
-    """Write ``chain`` (all three submodels, and its NSS's provenance) into ``folder``;
-    ``meta`` is the build's metadata (recorded under ``build``)."""
+    """Write ``chain`` (all three submodels, and its NSS's provenance) as the folder
+    ``folder``, whose earlier content it replaces atomically
+    (:func:`~parknss.outputs.artefact_folder`); ``meta`` is the build's metadata (recorded
+    under ``build``)."""
     out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
     missing = [c for c in CHANNELS if chain.model(c) is None]
     if missing:
         raise CheckpointError(f"{out}: a deployed chain needs all submodels; {missing} measured")
     cfg = chain.provenance.config
     if cfg is None:
         raise CheckpointError(f"{out}: the chain carries no NSS config (chain.provenance)")
+    with artefact_folder(out, overwrite=True, kind="chain") as tmp:
+        _write_chain(tmp, chain, cfg, meta)
+    return out
+
+
+def _write_chain(out: Path, chain: Chain, cfg: NSSConfig, meta: dict) -> None:
     save_model(out / NSS_DIR, chain.nss, cfg, chain.provenance.training)
     tensors, channels = {}, {}
     for ch in CHANNELS:
@@ -86,7 +114,7 @@ def write_chain(folder: str | Path, chain: Chain, meta: dict) -> Path:
         "build": {"git_revision": git_revision(), **meta},
     }
     atomic_write_text(out / META, json.dumps(doc, indent=2))
-    return out
+    write_manifest(out)
 
 
 def _read_meta(folder: Path) -> dict:
@@ -127,36 +155,58 @@ def _build_models(doc: dict, src: Path) -> dict[str, ActuatorModel]:
             raise CheckpointError(f"{src}: channel {ch!r}: invalid entry ({exc})") from exc
         if spec.channel != ch:
             raise CheckpointError(f"{src}: channel {ch!r} holds a {spec.channel} candidate")
+        _check_sizes(arch, f"{src}: channel {ch!r}")
         torch.manual_seed(0)
         models[ch] = build_candidate(spec, scaling, arch)
     return models
+
+
+def _check_sizes(arch: ArchConfig, where: str) -> None:
+    """Refuse, before a candidate is built, structure sizes beyond the documented limits."""
+    src = Path(where)
+    for name in ("hammerstein_hidden", "narx_hidden"):
+        hidden = getattr(arch, name)
+        check_size(f"arch.{name} layers", len(hidden), MAX_LAYERS, src)
+        check_size(f"arch.{name} units", max(hidden, default=0), MAX_UNITS, src)
+    for name in ("gru_hidden", "lstm_hidden"):
+        check_size(f"arch.{name}", getattr(arch, name), MAX_UNITS, src)
+    for name in ("narx_lags", "narx_long_lags"):
+        check_size(f"arch.{name}", getattr(arch, name), MAX_LAGS, src)
 
 
 def _load_weights(doc: dict, folder: Path, models: dict[str, ActuatorModel]) -> None:
     w = doc.get("weights")
     if not isinstance(w, dict) or "sha256" not in w:
         raise CheckpointError(f"{folder / META}: no weights entry")
-    wpath = folder / str(w.get("file", WEIGHTS))
+    if str(w.get("file", WEIGHTS)) != WEIGHTS:
+        raise CheckpointError(f"{folder / META}: weights file {w.get('file')!r}, a chain's is "
+                              f"{WEIGHTS!r}")
+    wpath = folder / WEIGHTS
     if not wpath.is_file():
         raise CheckpointError(f"{wpath}: weights file not found")
     if sha256_file(wpath) != w["sha256"]:
         raise CheckpointError(f"{wpath}: weights are corrupt or truncated (SHA-256 mismatch)")
-    try:
-        tensors = load_file(str(wpath))
-    except Exception as exc:  # safetensors raises its own error types
-        raise CheckpointError(f"{wpath}: unreadable safetensors file ({exc})") from exc
+    header = safetensors_header(wpath)
+    check_float_dtypes(header, wpath)
     for ch, m in models.items():
         want = {k: tuple(v.shape) for k, v in m.state_dict().items()}
-        have = {k[len(ch) + 1 :]: v for k, v in tensors.items() if k.startswith(ch + ".")}
+        have = {k[len(ch) + 1 :]: s for k, (_, s) in header.items() if k.startswith(ch + ".")}
         for k in sorted(set(want) | set(have)):
             if k not in have:
                 raise CheckpointError(f"{wpath}: weights lack {ch}.{k} (shape {want[k]})")
             if k not in want:
                 raise CheckpointError(f"{wpath}: unexpected weight {ch}.{k}")
-            if tuple(have[k].shape) != want[k]:
+            if have[k] != want[k]:
                 raise CheckpointError(f"{wpath}: weight {ch}.{k} has shape "
-                                      f"{tuple(have[k].shape)}, the candidate needs {want[k]}")
-        m.load_state_dict(have)
+                                      f"{have[k]}, the candidate needs {want[k]}")
+    try:
+        tensors = load_file(str(wpath))
+    except Exception as exc:  # safetensors raises its own error types
+        raise CheckpointError(f"{wpath}: unreadable safetensors file ({exc})") from exc
+    check_finite(tensors, wpath)
+    for ch, m in models.items():
+        m.load_state_dict({k[len(ch) + 1 :]: v for k, v in tensors.items()
+                           if k.startswith(ch + ".")})
         m.eval()
         m.requires_grad_(False)
 
@@ -164,6 +214,9 @@ def _load_weights(doc: dict, folder: Path, models: dict[str, ActuatorModel]) -> 
 def read_chain(path: str | Path) -> tuple[Chain, dict, Path]:
     """(Chain, build metadata, folder) from an artefact folder."""
     folder = Path(path)
+    if not folder.is_dir():
+        raise CheckpointError(f"{folder}: chain folder not found")
+    verify_manifest(folder, required=MEMBERS)
     doc = _read_meta(folder)
     src = folder / META
     nss_dir = folder / NSS_DIR

@@ -1,8 +1,8 @@
 """Parked training states: an unfinished study fit carried from one sitting to the next.
 
 A study fit (a job of :data:`~parknss.experiments.jobs.STATEFUL_JOBS`) checkpoints its
-resumable training state (:mod:`parknss.nss.train_state`: ``train_state.safetensors`` and
-``train_state.json``, about 2 MB for the paper's 6x128 net) in its run folder,
+resumable training state (:mod:`parknss.nss.train_state`: ``train_state.json`` and the
+tensor file it names, about 2 MB for the paper's 6x128 net) in its run folder,
 ``OUT/state/<folder>/``, every ``train.checkpoint_every`` steps. Run folders are scratch
 (``runs/`` is not committed, and a fresh checkout has none), so a paper-recipe fit (about
 one CPU hour here) still running when a sitting ends would start over at step 0 in the
@@ -13,11 +13,11 @@ next. Parking carries it over:
   the key its result will be stored under: the job, the campaign's data hash and the
   training-code version; :func:`label`).
 * ``parknss results park OUT`` copies the state of every labelled fit of run folder ``OUT``
-  that the store does not hold yet into ``<store>/inflight/<store key>/`` (the two state
-  files and ``job.json``; :func:`park_run`), to be committed with the store. A state is
-  copied only when it is further along than the one already parked, and only whole: the
-  tensor file's SHA-256 must match the one its JSON records (a fit that checkpoints during
-  the copy is copied again).
+  that the store does not hold yet into ``<store>/inflight/<store key>/`` (the newest
+  generation's JSON and tensor file, and ``job.json``; :func:`park_run`), to be committed
+  with the store. A state is copied only when it is further along than the one already
+  parked, and only whole: the tensor file's SHA-256 must match the one its JSON records (a
+  fit that checkpoints during the copy is copied again).
 * A later run of a job with that key, in any run folder and on any machine with the same
   training code, starts from the parked state when it is further along than its own
   folder's (:func:`seed`); the fit checks the state's fingerprint (config, data, split)
@@ -33,6 +33,7 @@ that fold, not a bare fold job of the same arguments.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 from collections.abc import Mapping
@@ -40,9 +41,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from parknss import durable
 from parknss.errors import CheckpointError
+from parknss.nss import train_state
 from parknss.nss.checkpoint import atomic_write_text, sha256_file
-from parknss.nss.train_state import FORMAT, META, TENSORS
+from parknss.nss.train_state import FORMAT, META
 
 INFLIGHT = "inflight"
 """The store's folder of parked states: ``<store>/inflight/<store key>/``."""
@@ -110,11 +113,11 @@ def read_info(folder: Path) -> StateInfo:
         step, wall = int(meta["epoch"]), float(meta["wall_s"])
         cpu = None if meta.get("cpu_s") is None else float(meta["cpu_s"])
         sha = meta["sha256"]
+        tensors = folder / train_state.tensors_name(meta)
     except FileNotFoundError as exc:
         raise CheckpointError(f"{folder}: no training state written yet") from exc
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, CheckpointError) as exc:
         raise CheckpointError(f"{folder / META}: unreadable ({exc})") from exc
-    tensors = folder / TENSORS
     if not tensors.is_file() or sha256_file(tensors) != sha:
         raise CheckpointError(f"{tensors}: missing or does not match its {META} (torn)")
     return StateInfo(folder, key, fn, name or key, step, cpu, wall)
@@ -122,7 +125,8 @@ def read_info(folder: Path) -> StateInfo:
 
 def copy_state(src: Path, dst: Path) -> StateInfo:
     """Copy the labelled state ``src`` to ``dst`` whole (replacing it): into a sibling
-    temporary folder, checked with :func:`read_info`, then renamed; a copy that a
+    temporary folder, checked with :func:`read_info`, then committed in ``dst`` as its
+    newest generation (:func:`parknss.nss.train_state.commit`); a copy that a
     checkpoint write in ``src`` tore is made again, up to :data:`COPY_TRIES` times."""
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(dst.name + ".tmp")
@@ -130,17 +134,28 @@ def copy_state(src: Path, dst: Path) -> StateInfo:
     for _ in range(COPY_TRIES):
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        for name in (JOB_FILE, TENSORS, META):
-            shutil.copyfile(src / name, tmp / name)
-        if (src / SITTINGS).is_file():
-            shutil.copyfile(src / SITTINGS, tmp / SITTINGS)
         try:
+            meta = (src / META).read_bytes()  # the JSON first: it names the tensor file
+            (tmp / META).write_bytes(meta)
+            tensors = train_state.tensors_name(json.loads(meta))
+            for name in (JOB_FILE, tensors):
+                shutil.copyfile(src / name, tmp / name)
+            if (src / SITTINGS).is_file():
+                shutil.copyfile(src / SITTINGS, tmp / SITTINGS)
             info = read_info(tmp)
-        except CheckpointError as exc:
-            last = exc
+        except (OSError, ValueError, AttributeError, CheckpointError) as exc:
+            last = exc if isinstance(exc, CheckpointError) else CheckpointError(str(exc))
             continue
-        shutil.rmtree(dst, ignore_errors=True)
-        tmp.replace(dst)
+        # into dst as its newest generation: the state parked there before stays whole
+        # until the commit (train_state.commit), so a kill never loses both; then only the
+        # new one is kept (what is committed to git)
+        dst.mkdir(parents=True, exist_ok=True)
+        for name in (JOB_FILE, tensors):
+            durable.write_bytes(dst / name, (tmp / name).read_bytes())
+        if (tmp / SITTINGS).is_file():
+            durable.write_bytes(dst / SITTINGS, (tmp / SITTINGS).read_bytes())
+        train_state.commit(dst, meta, keep_previous=False)
+        shutil.rmtree(tmp, ignore_errors=True)
         info.folder = dst
         return info
     shutil.rmtree(tmp, ignore_errors=True)
@@ -169,12 +184,19 @@ def seed(root: Path, key: str, state_dir: str | Path) -> StateInfo | None:
     if own is not None and own >= info.step:
         return None
     dst.mkdir(parents=True, exist_ok=True)
-    for name in (TENSORS, META, SITTINGS):  # the tensors first: the JSON names their hash
-        if name == SITTINGS and not (src / name).is_file():
-            continue
-        tmp = dst / (name + ".tmp")
-        shutil.copyfile(src / name, tmp)
-        tmp.replace(dst / name)
+    try:
+        meta = (src / META).read_bytes()
+        name = train_state.tensors_name(json.loads(meta))
+        blob = (src / name).read_bytes()
+    except (OSError, ValueError, AttributeError, CheckpointError):
+        return None
+    if json.loads(meta).get("sha256") != hashlib.sha256(blob).hexdigest():
+        return None
+    # the tensors first, then the JSON committed as the newest generation (train_state)
+    durable.write_bytes(dst / name, blob)
+    if (src / SITTINGS).is_file():
+        durable.write_bytes(dst / SITTINGS, (src / SITTINGS).read_bytes())
+    train_state.commit(dst, meta)
     return info
 
 

@@ -1,31 +1,50 @@
-"""The resumable state of a fit: ``train_state.safetensors`` + ``train_state.json``.
+"""The resumable state of a fit: ``train_state.json`` naming its tensor file.
 
 Tensors (current weights ``model/*``, best weights ``best/*``, Adam moments and step
-counts ``opt/<i>/*``, the torch RNG ``rng/torch``) go into safetensors; the step, the
-history, the optimizer's hyper-parameters, the wall and CPU time and a fingerprint of the
-configuration and data go into the JSON, with the SHA-256 of the tensor file so that a
-torn pair is detected. A state is resumed only by a fit whose fingerprint matches.
+counts ``opt/<i>/*``, the torch RNG ``rng/torch``) go into a safetensors file named after
+its content, ``train_state.<sha256[:16]>.safetensors``; the step, the history, the
+optimizer's hyper-parameters, the wall and CPU time, a fingerprint of the configuration
+and data, the tensor file's name and its SHA-256 go into ``train_state.json``. A state is
+resumed only by a fit whose fingerprint matches.
+
+Crash consistency: a write is a new *generation*. The tensors go to their new file first
+(temporary sibling, fsync, rename); the JSON in place is kept as ``train_state.prev.json``;
+then the new JSON replaces ``train_state.json`` by one durable rename, the commit; only
+then are tensor files that neither JSON names deleted. So at every instant
+``train_state.json`` names a complete tensor file: a kill anywhere (the crash points
+``train_state.*`` of :mod:`parknss.durable` hit every window in the tests) leaves the old
+or the new state whole. :func:`load` verifies the tensors against the SHA-256 the JSON
+records; when the newest generation is unusable all the same (a file damaged on disk) and
+the previous one is whole, it resumes from the previous one and says so on stderr; when
+neither is, it refuses in one line. States written before generations existed (the tensors
+in ``train_state.safetensors``) load as before.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file
+from safetensors.torch import load as load_bytes
+from safetensors.torch import save as save_bytes
 
+from parknss import durable
 from parknss.errors import CheckpointError
-from parknss.nss.checkpoint import atomic_save_tensors, atomic_write_text, sha256_file
 from parknss.nss.config import NSSConfig, fit_identity
 from parknss.nss.history import History
 from parknss.nss.model import NSSModel
 
 FORMAT = "parknss-nss-train-state/1"
 TENSORS = "train_state.safetensors"
+"""The tensor file of a state written before generations (a JSON without ``tensors``)."""
 META = "train_state.json"
+PREV_META = "train_state.prev.json"
+"""The JSON of the generation before the newest, kept until the next commit."""
 
 
 def fingerprint(
@@ -43,7 +62,25 @@ def fingerprint(
 
 
 def exists(folder: Path) -> bool:
-    return (Path(folder) / META).is_file()
+    return (Path(folder) / META).is_file() or (Path(folder) / PREV_META).is_file()
+
+
+def tensors_name(meta: dict) -> str:
+    """The tensor file a state JSON names (:data:`TENSORS` for a state written before
+    generations); a :class:`CheckpointError` for a name that is not a plain file name."""
+    name = meta.get("tensors", TENSORS)
+    plain = isinstance(name, str) and "/" not in name and "\\" not in name
+    if not (plain and name.startswith("train_state.") and name.endswith(".safetensors")):
+        raise CheckpointError(f"training state names an invalid tensor file {name!r}")
+    return name
+
+
+def tensors_path(folder: Path) -> Path | None:
+    """The tensor file of the newest state in ``folder`` (None: no readable JSON)."""
+    try:
+        return Path(folder) / tensors_name(json.loads((Path(folder) / META).read_text()))
+    except (OSError, ValueError, CheckpointError, AttributeError):
+        return None
 
 
 @dataclass
@@ -53,6 +90,7 @@ class State:
     best: dict[str, torch.Tensor] | None
     wall_s: float
     cpu_s: float | None  # CPU time of the fit so far; None for a state written without it
+    note: str = ""  # non-empty when the newest generation was unusable and the previous used
 
 
 def save(
@@ -77,7 +115,11 @@ def save(
         for k, v in st.items():
             tensors[f"opt/{i}/{k}"] = v if torch.is_tensor(v) else torch.tensor(v)
     tensors["rng/torch"] = torch.get_rng_state()
-    atomic_save_tensors(tensors, folder / TENSORS)
+    blob = save_bytes({k: v.detach().contiguous() for k, v in tensors.items()})
+    sha = hashlib.sha256(blob).hexdigest()
+    name = f"train_state.{sha[:16]}.safetensors"
+    durable.write_bytes(folder / name, blob, crash="train_state.tensors_tmp")
+    durable.crash_point("train_state.tensors")
     meta = {
         "format": FORMAT,
         "epoch": epoch,
@@ -87,33 +129,104 @@ def save(
         "has_best": best is not None,
         "param_groups": sd["param_groups"],
         "history": hist.to_json(),
-        "sha256": sha256_file(folder / TENSORS),
+        "tensors": name,
+        "sha256": sha,
     }
-    atomic_write_text(folder / META, json.dumps(meta))
+    commit(folder, json.dumps(meta).encode())
 
 
-def load(folder: Path, model: NSSModel, opt: torch.optim.Optimizer, fp: str) -> State:
-    """Restore model and optimizer in place; return the epoch, history and best weights."""
+def commit(folder: Path, meta: bytes, keep_previous: bool = True) -> None:
+    """Make ``meta`` (a state JSON whose tensor file is already in ``folder``, durably) the
+    newest generation: keep the JSON in place as :data:`PREV_META`, rename the new one over
+    :data:`META`, then delete the tensor files neither names (see the module doc).
+    ``keep_previous=False`` (a parked copy, committed to git): drop the previous
+    generation once the new one is in place."""
     folder = Path(folder)
-    src = folder / META
+    cur = folder / META
+    if cur.is_file():
+        durable.write_bytes(folder / PREV_META, cur.read_bytes())
+        durable.crash_point("train_state.prev")
+    durable.write_bytes(cur, meta, crash="train_state.meta_tmp")
+    durable.crash_point("train_state.meta")
+    if not keep_previous:
+        (folder / PREV_META).unlink(missing_ok=True)
+    keep = set()
+    for name in (META, PREV_META):
+        try:
+            keep.add(tensors_name(json.loads((folder / name).read_text())))
+        except (OSError, ValueError, CheckpointError, AttributeError):
+            continue
+    for p in folder.glob("train_state*.safetensors"):
+        if p.name not in keep:
+            p.unlink(missing_ok=True)
+    for p in folder.glob(".train_state*.tmp-*"):  # a killed writer's temporary file
+        if not p.name.endswith(f".tmp-{os.getpid()}"):
+            p.unlink(missing_ok=True)
+
+
+def _read(folder: Path, src: Path, fp: str) -> tuple[dict, dict[str, torch.Tensor]]:
+    """The JSON and the verified tensors of the generation ``src`` names."""
     try:
         meta = json.loads(src.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise CheckpointError(f"{src}: unreadable training state ({exc})") from exc
-    if meta.get("format") != FORMAT:
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{src}: not a parknss training state")
     if meta.get("fingerprint") != fp:
-        raise CheckpointError(
+        raise _ForeignError(
             f"{src}: training state belongs to another config, data or split; "
             "remove it or train without --resume"
         )
-    tpath = folder / TENSORS
-    if not tpath.is_file() or sha256_file(tpath) != meta.get("sha256"):
+    try:
+        tpath = folder / tensors_name(meta)
+    except CheckpointError as exc:
+        raise CheckpointError(f"{src}: {exc}") from exc
+    try:
+        blob = tpath.read_bytes()
+    except OSError:
+        blob = b""
+    if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
         raise CheckpointError(f"{tpath}: training state is corrupt or truncated")
     try:
-        t = load_file(str(tpath))
+        return meta, load_bytes(blob)
     except Exception as exc:  # safetensors raises its own error types
         raise CheckpointError(f"{tpath}: unreadable safetensors file ({exc})") from exc
+
+
+class _ForeignError(CheckpointError):
+    """A state of another fit (never replaced by an older generation)."""
+
+
+def load(folder: Path, model: NSSModel, opt: torch.optim.Optimizer, fp: str) -> State:
+    """Restore model and optimizer in place; return the epoch, history and best weights.
+
+    The newest generation (:data:`META`) is used when it is whole; else the previous one
+    (:data:`PREV_META`), with a one-line note on stderr (and in :attr:`State.note`); else a
+    one-line :class:`CheckpointError` naming what is wrong with the newest."""
+    folder = Path(folder)
+    first: CheckpointError | None = None
+    for src in (folder / META, folder / PREV_META):
+        if not src.is_file() and src.name == PREV_META:
+            break
+        try:
+            meta, t = _read(folder, src, fp)
+        except _ForeignError:
+            raise
+        except CheckpointError as exc:
+            first = first or exc
+            continue
+        note = ""
+        if first is not None:
+            note = (f"{folder}: the newest training state is unusable ({first}); resuming "
+                    f"from the previous one, step {meta.get('epoch')}")
+            print(f"parknss: note: {note}", file=sys.stderr)
+        return _restore(meta, t, model, opt, note)
+    assert first is not None
+    raise first
+
+
+def _restore(meta: dict, t: dict[str, torch.Tensor], model: NSSModel,
+             opt: torch.optim.Optimizer, note: str) -> State:
     model.load_state_dict({k[6:]: v for k, v in t.items() if k.startswith("model/")})
     best = {k[5:]: v for k, v in t.items() if k.startswith("best/")} if meta["has_best"] else None
     state: dict[int, dict] = {}
@@ -130,4 +243,5 @@ def load(folder: Path, model: NSSModel, opt: torch.optim.Optimizer, fp: str) -> 
         best,
         float(meta["wall_s"]),
         None if cpu is None else float(cpu),
+        note,
     )
