@@ -259,6 +259,19 @@ def check_location(out: str | Path) -> Path:
     return p
 
 
+def check_file_target(out: str | Path, *, overwrite: bool) -> Path:
+    """Refuse, before any work, a single output file ``out`` (``parknss export --out``)
+    that cannot be written: a folder, an existing file without ``overwrite``
+    (:class:`OutputExistsError`), or a place :func:`check_location` refuses; ``out``."""
+    p = Path(out)
+    if p.is_dir():
+        raise OutputLocationError(f"{p}: is a folder; --out names the file to write")
+    if (p.exists() or p.is_symlink()) and not overwrite:
+        raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    check_location(p.absolute().parent)
+    return p
+
+
 def describe_contents(out: str | Path) -> str | None:
     """What the existing path ``out`` holds, for a message (``"a campaign (campaign.json)"``,
     ``"a run of parknss cv (run.json)"``, ``"a run (3 entries)"``, ``"a file"``), or None
@@ -510,7 +523,7 @@ def read_manifest(out: str | Path) -> dict | None:
     p = Path(out) / RUN_MANIFEST
     try:
         doc = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return doc if isinstance(doc, dict) and "command" in doc and "digest" in doc else None
 
@@ -676,9 +689,10 @@ def run_folder(
             "started_utc": _now(),
             "finished_utc": None,
         }
-        write_text_atomic(out / RUN_MANIFEST, json.dumps(manifest, indent=2))
     run = RunFolder(out, state, manifest)
     try:
+        if state != "resumed":
+            write_text_atomic(out / RUN_MANIFEST, json.dumps(manifest, indent=2))
         yield run
     except BaseException as exc:
         if state == "replacing":
@@ -686,7 +700,7 @@ def run_folder(
             os.replace(replaced, out)
         elif state == "new" and _disk_full(exc):
             _drop_partial(out, created)
-        elif state == "new" and [p.name for p in out.iterdir()] == [RUN_MANIFEST]:
+        elif state == "new" and [p.name for p in out.iterdir()] in ([RUN_MANIFEST], []):
             _unclaim(out, created)
         _note_interrupt(exc, lambda: _run_note(out, state))
         raise

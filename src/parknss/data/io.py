@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 import scipy.io
 from pydantic import Field, ValidationError
 
-from parknss.config import StrictModel
+from parknss.config import StrictModel, read_json
 from parknss.data.assemble import Assembled, LogRead, assemble
 from parknss.data.canlog import CAN_SUFFIXES
 from parknss.data.mapping import (
@@ -686,10 +686,7 @@ def _read_index(folder: Path) -> CampaignIndex:
             "(bring raw logs in with `parknss campaign import`)"
         )
     _nonempty(jpath)
-    try:
-        doc = json.loads(jpath.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{jpath}: not valid JSON ({one_line(exc)})") from exc
+    doc = read_json(jpath, DataError)  # depth-limited, unreadable: one line
     try:
         index = CampaignIndex.model_validate(doc)
     except ValidationError as exc:
