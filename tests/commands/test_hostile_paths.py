@@ -116,3 +116,24 @@ def test_a_product_link_out_of_the_folder_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "resolves outside the output folder" in err[0]
     assert target.read_text() == "keep"
+
+
+@pytest.mark.parametrize("stem", ["t" * 200, "a\u202eb\u200fc"])
+def test_a_trial_id_from_a_log_file_name_is_safe_or_refused(stem, tmp_path, capsys):
+    from helpers.synth import make_trial
+    from parknss.data.io import read_campaign, write_trial_csv
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    write_trial_csv(make_trial(300), logs / f"{stem}.csv")
+    out = tmp_path / "camp"
+    code = main(["campaign", "import", str(logs), "--out", str(out)])
+    if len(stem) > 100:  # refused in one line, nothing written
+        assert code == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert "trial id" in err[-1] and "at most 100" in err[-1]
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["logs"]
+    else:  # the control characters become '_' in the id
+        assert code == 0
+        (trial,) = read_campaign(out)
+        assert trial.id == "a_b_c" and (out / "a_b_c.parquet").is_file()
