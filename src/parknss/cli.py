@@ -84,9 +84,8 @@ def _signals() -> Iterator[list[int]]:
 def os_error_line(exc: OSError) -> str:
     """An ``OSError`` as the one line after ``parknss: error:``: the file and the reason
     (``runs/x/a.json: No space left on device``)."""
-    where = exc.filename if exc.filename is not None else None
     reason = exc.strerror or one_line(exc)
-    return f"{where}: {reason}" if where is not None else reason
+    return f"{exc.filename}: {reason}" if exc.filename is not None else reason
 
 
 def _interrupted(signum: int) -> int:
