@@ -137,3 +137,21 @@ def test_a_trial_id_from_a_log_file_name_is_safe_or_refused(stem, tmp_path, caps
         assert code == 0
         (trial,) = read_campaign(out)
         assert trial.id == "a_b_c" and (out / "a_b_c.parquet").is_file()
+
+
+def test_overwrite_replaces_a_linked_out_never_its_target(tmp_path, capsys):
+    """``--out`` is a link to an unrelated folder: ``--overwrite`` replaces the link with
+    the run folder; the folder it pointed at keeps every file."""
+    important = tmp_path / "important"
+    important.mkdir()
+    (important / "data.txt").write_text("keep me")
+    out = tmp_path / "out"
+    out.symlink_to(important)
+    scene = _scene(tmp_path / "s.json", "cell")
+    argv = ["plan", "--scene", str(scene), "--no-refine", "--out", str(out)]
+    assert main(argv) == 2  # holds something else: refused without --overwrite
+    assert main([*argv, "--overwrite"]) == 0
+    capsys.readouterr()
+    assert sorted(p.name for p in important.iterdir()) == ["data.txt"]
+    assert (important / "data.txt").read_text() == "keep me"
+    assert not out.is_symlink() and (out / "plan_cell.json").is_file()
