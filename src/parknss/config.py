@@ -69,6 +69,71 @@ def shipped_config(name: str) -> Path:
     return p
 
 
+MAX_NESTING = 64
+"""The deepest nesting of lists and mappings a JSON or YAML input parknss reads may have
+(scenes, configs, manifests: a few levels in practice); deeper documents are refused in
+one line instead of exhausting Python's recursion."""
+
+
+def nesting_depth(doc: Any) -> int:
+    """The nesting depth of lists and mappings in ``doc`` (a scalar: 0), without recursion."""
+    depth, stack = 0, [(doc, 1)]
+    while stack:
+        node, level = stack.pop()
+        if isinstance(node, Mapping):
+            children = list(node.values())
+        elif isinstance(node, list | tuple):
+            children = list(node)
+        else:
+            continue
+        depth = max(depth, level)
+        if depth > MAX_NESTING:
+            return depth
+        stack.extend((c, level + 1) for c in children)
+    return depth
+
+
+def parse_json(
+    text: str | bytes, source: str, error: type[Exception] = ConfigError
+) -> Any:
+    """``text`` parsed as JSON, or one-line ``error`` naming ``source``: not valid JSON,
+    or nested deeper than :data:`MAX_NESTING` (a RecursionError never escapes)."""
+    try:
+        doc = json.loads(text)
+    except RecursionError as exc:
+        raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused") from exc
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise error(f"{source}: not valid JSON ({exc.__class__.__name__})") from exc
+    if nesting_depth(doc) > MAX_NESTING:
+        raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused")
+    return doc
+
+
+def read_json(path: str | Path, error: type[Exception] = ConfigError) -> Any:
+    """The JSON file ``path`` through :func:`parse_json`; one-line ``error`` when it
+    cannot be read (missing, no permission) or parsed."""
+    p = Path(path)
+    try:
+        text = p.read_bytes()
+    except OSError as exc:
+        raise error(f"{p}: cannot read ({exc.strerror or exc.__class__.__name__})") from exc
+    return parse_json(text, str(p), error)
+
+
+def parse_yaml(text: str, source: str, error: type[Exception] = ConfigError) -> Any:
+    """``text`` parsed as YAML (safe loader), or one-line ``error`` naming ``source``: not
+    valid YAML, or nested deeper than :data:`MAX_NESTING`."""
+    try:
+        doc = yaml.safe_load(text)
+    except RecursionError as exc:
+        raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused") from exc
+    except yaml.YAMLError as exc:
+        raise error(f"{source}: not valid YAML ({exc.__class__.__name__})") from exc
+    if nesting_depth(doc) > MAX_NESTING:
+        raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused")
+    return doc
+
+
 def read_yaml_mapping(path: str | Path) -> dict[str, Any]:
     """The top-level mapping of a YAML file ({} for an empty file); one-line ConfigError
     for a missing file, invalid YAML or a top level that is not a mapping."""
@@ -76,9 +141,7 @@ def read_yaml_mapping(path: str | Path) -> dict[str, Any]:
     if not p.is_file():
         raise ConfigError(f"{p}: config file not found")
     try:
-        loaded = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
+        loaded = parse_yaml(p.read_text(), str(p))
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{p}: cannot read ({exc.__class__.__name__})") from exc
     if loaded is None:

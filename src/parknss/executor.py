@@ -194,14 +194,18 @@ def run_jobs(
         file=sys.stderr,
     )
     runner = _run_ray if executor == "ray" else _run_local
-    for i, (value, wall_s, cpu_s) in runner([jobs[i] for i in todo], todo, workers, address):
-        results[i] = value
-        if cache:
-            cache.put(jobs[i], value)
-        if store:
-            store.put(jobs[i], value, wall_s, cpu_s)
-        count.computed += 1
-        bar.update(1)
+    stream = runner([jobs[i] for i in todo], todo, workers, address)
+    try:
+        for i, (value, wall_s, cpu_s) in stream:
+            results[i] = value
+            if cache:
+                cache.put(jobs[i], value)
+            if store:
+                store.put(jobs[i], value, wall_s, cpu_s)
+            count.computed += 1
+            bar.update(1)
+    finally:  # an interrupt or error between results: stop the pool's workers now
+        stream.close()
     bar.close()
     if progress and store is not None:
         print(f"{desc}: {count.cache} from the run cache, {count.store} from the store, "
@@ -227,6 +231,8 @@ def _run_local(
 
     # results as they finish (not in submission order), so each is cached and stored as
     # soon as it exists: a long study killed mid-way keeps every fit that completed
+    # closing this generator early (an interrupt, SIGTERM, an error) closes joblib's, which
+    # kills the pool's workers in this thread before the exception goes on
     with parallel_config(backend="loky", inner_max_num_threads=1):
         run = Parallel(n_jobs=workers, return_as="generator_unordered")
         yield from run(delayed(_execute_indexed)(i, j) for i, j in zip(index, jobs, strict=True))

@@ -56,18 +56,59 @@ Every final product is written atomically (:func:`atomic_file`: a temporary sibl
 renamed over the target), so a failing or killed run never leaves a torn table, JSON or
 figure: each product is the earlier run's or this run's, whole. A new run that fails
 before it wrote anything but its manifest removes the folder it created.
+
+Names never become paths
+------------------------
+
+A name a user supplies (a scene's ``meta.name``, a CommonRoad benchmark id, a TPCAP case
+name, a trial id from a log's file name) becomes part of a file or folder name only
+through :func:`safe_stem`, which returns it unchanged or refuses it in one line
+(:class:`UnsafeNameError`); names are never repaired, so two scenes cannot silently share
+a file. A safe stem is 1 to :data:`NAME_MAX_CHARS` characters (and at most
+:data:`NAME_MAX_BYTES` bytes in UTF-8, so that a prefix and suffix still fit a file
+system's 255-byte limit) of letters, digits, marks, punctuation, symbols and plain spaces;
+it does not start with ``.``, ``-`` or a space nor end with a space, and holds no path
+separator (``/``, ``\\``), no ``..``, no glob character (``* ? [ ]``), and no control,
+format (bidirectional marks such as U+200F, U+202E), surrogate, private-use, unassigned
+or line/paragraph-separator character. Every product path is then checked after path
+resolution to lie inside its run folder (:func:`inside`: symbolic links included), and a
+command's default run folder is ``runs/<command>/<safe stem>`` (:func:`default_run_folder`),
+so ``--overwrite`` only ever replaces that folder.
+
+Interrupts
+----------
+
+A command stopped by SIGINT or SIGTERM exits 130 or 143 with one line saying what was
+kept and how to resume (``parknss.cli``). The line comes from the innermost writer the
+interrupt passed through: :func:`run_folder` (the run's cache kept and the same command
+resumes it, or the earlier run put back), :func:`artefact_folder` (nothing written, the
+folder as it was) or a command's own :func:`keep_on_interrupt` (``parknss train``: the
+training state and ``--resume``); :func:`interrupt_note` reads it.
+
+Where an output can go
+----------------------
+
+:func:`check_location` refuses, before any work, an ``--out`` that cannot be written: one
+under a regular file, in a read-only folder, or on a file system that refuses new folders
+(``/proc``); :func:`check_writable` and :func:`run_folder` call it. An ``OSError`` while
+writing (disk full, ENOSPC) removes what the failing write left (the temporary file or
+folder, and the folders the claim created) and reaches the user as one line.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import glob
 import hashlib
 import json
 import os
 import re
 import shutil
 import subprocess
-from collections.abc import Iterator, Mapping
+import tempfile
+import unicodedata
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -89,6 +130,153 @@ RUN_MANIFEST = "run.json"
 
 class OutputExistsError(ParknssError):
     """The output folder holds something already and ``--overwrite`` was not given."""
+
+
+class UnsafeNameError(ParknssError):
+    """A user-supplied name cannot be part of a file name, or a path would leave its
+    output folder."""
+
+
+class OutputLocationError(ParknssError):
+    """An output folder cannot be written where it was asked for (under a file, in a
+    read-only folder, on a pseudo file system)."""
+
+
+# -------------------------------------------------------------------------- interrupts
+
+_NOTE: list[str] = []
+"""What the command being interrupted keeps and how to resume it (at most one entry)."""
+
+
+def interrupt_note(*, clear: bool = False) -> str | None:
+    """The line an interrupted command prints after ``parknss: interrupted:`` (what was
+    kept, how to resume), set by the innermost writer the interrupt passed through, or
+    None; ``clear`` forgets it (the CLI, after printing it)."""
+    note = _NOTE[0] if _NOTE else None
+    if clear:
+        _NOTE.clear()
+    return note
+
+
+def _note_interrupt(exc: BaseException | None, describe: Callable[[], str]) -> None:
+    if isinstance(exc, KeyboardInterrupt) and not _NOTE:
+        _NOTE.append(describe())
+
+
+@contextlib.contextmanager
+def keep_on_interrupt(describe: Callable[[], str]) -> Iterator[None]:
+    """Run the body; if SIGINT or SIGTERM (a KeyboardInterrupt) stops it, record
+    ``describe()`` as :func:`interrupt_note` (unless an inner writer did) and re-raise."""
+    try:
+        yield
+    except KeyboardInterrupt as exc:
+        _note_interrupt(exc, describe)
+        raise
+
+
+# ------------------------------------------------------------------------------- names
+
+NAME_MAX_CHARS = 100
+"""The longest user-supplied name accepted as a file-name stem, in characters."""
+
+NAME_MAX_BYTES = 150
+"""The longest user-supplied name accepted as a file-name stem, in UTF-8 bytes."""
+
+_REFUSED_CATEGORIES = frozenset({"Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"})
+_REFUSED_CHARS = frozenset("/\\*?[]")
+
+
+def _why_unsafe(name: str) -> str | None:
+    if not name:
+        return "is empty"
+    if len(name) > NAME_MAX_CHARS:
+        return f"is {len(name)} characters long (at most {NAME_MAX_CHARS})"
+    if len(name.encode("utf-8", "surrogatepass")) > NAME_MAX_BYTES:
+        return f"is longer than {NAME_MAX_BYTES} bytes in UTF-8"
+    for ch in name:
+        cat = unicodedata.category(ch)
+        if ch in _REFUSED_CHARS:
+            return f"contains {ch!r} (path separators and glob characters are refused)"
+        if cat in _REFUSED_CATEGORIES or (cat == "Zs" and ch != " "):
+            return f"contains the character U+{ord(ch):04X} ({unicodedata.name(ch, cat)})"
+    if ".." in name:
+        return "contains '..'"
+    if name[0] in ".- " or name[-1] == " ":
+        return "starts with '.', '-' or a space, or ends with a space"
+    return None
+
+
+def safe_stem(name: object, *, what: str = "name") -> str:
+    """``name`` unchanged when it is safe as (part of) a file or folder name, else a
+    one-line :class:`UnsafeNameError` saying why (see "Names never become paths" in the
+    module doc: 1 to :data:`NAME_MAX_CHARS` characters, no separators, ``..``, glob,
+    control or bidirectional characters; refused, never repaired).
+
+    Args:
+        name: the user-supplied name (a scene's meta.name, a trial id, ...).
+        what: what the name is, for the message ("scene name", "trial id").
+    """
+    if not isinstance(name, str):
+        raise UnsafeNameError(f"{what} {name!r} is not a string; it cannot name a file")
+    why = _why_unsafe(name)
+    if why is not None:
+        shown = repr(name if len(name) <= 40 else name[:40] + "...")  # escapes controls
+        raise UnsafeNameError(f"{what} {shown} {why}; it cannot name a file, rename it")
+    return name
+
+
+def inside(folder: str | Path, relative: str | Path) -> Path:
+    """``folder / relative``, refused with one :class:`UnsafeNameError` line unless its
+    resolved path (symbolic links followed) lies inside the resolved ``folder``."""
+    base = Path(folder)
+    path = base / relative
+    root = base.resolve()
+    if not path.resolve().is_relative_to(root) or path.resolve() == root:
+        raise UnsafeNameError(f"{path}: resolves outside the output folder {base}; refused")
+    return path
+
+
+def default_run_folder(command: str, name: object, *, what: str = "name") -> Path:
+    """The run folder of ``command`` without ``--out``: ``runs/<command>/<name>``, with
+    ``name`` checked by :func:`safe_stem` and the folder by :func:`inside`."""
+    return inside(Path("runs") / command, safe_stem(name, what=what))
+
+
+def check_location(out: str | Path) -> Path:
+    """Refuse, before any work, an output folder ``out`` that cannot be created or
+    written: its nearest existing ancestor is not a folder (``out`` under a regular
+    file), is not writable, or refuses a new folder (``/proc``). One line
+    (:class:`OutputLocationError`); ``out`` as a Path."""
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        return p  # a file at out: the callers' own refusal names it
+    existing = p.absolute()
+    while not existing.is_dir() and existing != existing.parent:
+        if existing.exists():
+            raise OutputLocationError(
+                f"{p}: {existing} is a file, not a folder; cannot write there"
+            )
+        existing = existing.parent
+    try:
+        probe = tempfile.mkdtemp(prefix=".parknss-probe-", dir=existing)
+    except OSError as exc:
+        reason = exc.strerror or exc.__class__.__name__
+        raise OutputLocationError(f"{p}: cannot write in {existing} ({reason})") from exc
+    os.rmdir(probe)
+    return p
+
+
+def check_file_target(out: str | Path, *, overwrite: bool) -> Path:
+    """Refuse, before any work, a single output file ``out`` (``parknss export --out``)
+    that cannot be written: a folder, an existing file without ``overwrite``
+    (:class:`OutputExistsError`), or a place :func:`check_location` refuses; ``out``."""
+    p = Path(out)
+    if p.is_dir():
+        raise OutputLocationError(f"{p}: is a folder; --out names the file to write")
+    if (p.exists() or p.is_symlink()) and not overwrite:
+        raise OutputExistsError(f"{p}: already exists (pass --overwrite to replace it)")
+    check_location(p.absolute().parent)
+    return p
 
 
 def describe_contents(out: str | Path) -> str | None:
@@ -131,6 +319,7 @@ def check_writable(out: str | Path, *, overwrite: bool, kind: str) -> Path:
             a file; or ``out`` contains the working directory (never replaced).
     """
     p = Path(out)
+    check_location(p)
     recover_stale(p)
     held = describe_contents(p)
     if held is None:
@@ -172,7 +361,7 @@ def recover_stale(out: str | Path) -> None:
     if not parent.is_dir():
         return
     for kind in ("replaced", "old", "tmp"):
-        for p in sorted(parent.glob(f".{out.name}.{kind}-*")):
+        for p in sorted(parent.glob(f".{glob.escape(out.name)}.{kind}-*")):
             pid = p.name.rsplit("-", 1)[-1]
             if not pid.isdigit() or _alive(int(pid)):
                 continue
@@ -208,6 +397,7 @@ def artefact_folder(out: str | Path, *, overwrite: bool, kind: str) -> Iterator[
     """
     out = check_writable(out, overwrite=overwrite, kind=kind)
     parent = out.absolute().parent
+    created = _first_missing(parent)
     parent.mkdir(parents=True, exist_ok=True)
     tmp = parent / f".{out.name}.tmp-{os.getpid()}"
     old = parent / f".{out.name}.old-{os.getpid()}"
@@ -215,8 +405,11 @@ def artefact_folder(out: str | Path, *, overwrite: bool, kind: str) -> Iterator[
     tmp.mkdir()
     try:
         yield tmp
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        _remove_empty(parent, created)
+        _note_interrupt(exc, lambda: f"nothing written, {out} is as it was; run the "
+                        "same command again")
         raise
     try:
         durable.fsync_tree(tmp)
@@ -346,7 +539,7 @@ def read_manifest(out: str | Path) -> dict | None:
     p = Path(out) / RUN_MANIFEST
     try:
         doc = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return doc if isinstance(doc, dict) and "command" in doc and "digest" in doc else None
 
@@ -361,9 +554,14 @@ class RunFolder:
     state: str
     manifest: dict = field(default_factory=dict)
 
+    def file(self, name: str) -> Path:
+        """The path of the product ``name`` (relative to the folder), refused in one line
+        when it resolves outside the folder (:func:`inside`)."""
+        return inside(self.path, name)
+
     def write_text(self, name: str, text: str) -> Path:
         """Write the product ``name`` (relative to the folder) atomically; its path."""
-        return write_text_atomic(self.path / name, text)
+        return write_text_atomic(self.file(name), text)
 
     def write_json(self, name: str, doc: Any, **dumps: Any) -> Path:
         """Write ``doc`` as indented JSON to the product ``name`` atomically; its path."""
@@ -395,10 +593,49 @@ def _first_missing(path: Path) -> Path | None:
 def _unclaim(out: Path, created: Path | None) -> None:
     """Undo a new claim that wrote nothing but its manifest: the manifest, and the
     folders the claim created while they are empty."""
-    (out / RUN_MANIFEST).unlink()
+    with contextlib.suppress(FileNotFoundError):
+        (out / RUN_MANIFEST).unlink()
+    _remove_empty(out.absolute(), created)
+
+
+def _run_note(out: Path, state: str) -> str:
+    """What an interrupted run keeps in ``out`` and how to resume it, for one line."""
+    if state == "replacing":
+        return f"the earlier content of {out} is put back; run the same command again"
+    if not (out / RUN_MANIFEST).is_file():
+        return f"nothing kept in {out}; run the same command again"
+    cache = out / "cache"
+    if cache.is_dir() and any(cache.iterdir()):
+        n = sum(1 for _ in cache.glob("*.json"))
+        return (f"{n} finished job(s) kept in {cache}; run the same command again to "
+                "resume from them")
+    return f"the partial run is kept in {out}; run the same command again to redo it there"
+
+
+def _disk_full(exc: BaseException | None) -> bool:
+    return isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT)
+
+
+def _drop_partial(out: Path, created: Path | None) -> None:
+    """A new run stopped by a full disk: remove its partial products, keeping only a
+    result cache (``cache/``, with the manifest, so the same command resumes it); with
+    no cache, the folder and the folders the claim created."""
+    cache = out / "cache"
+    keep = cache.is_dir() and any(cache.iterdir())
+    for p in list(out.iterdir()):
+        if keep and p.name in ("cache", RUN_MANIFEST):
+            continue
+        _remove(p)
+    if not keep:
+        _remove_empty(out.absolute(), created)
+
+
+def _remove_empty(folder: Path, created: Path | None) -> None:
+    """Remove ``folder`` and its parents up to ``created`` (the outermost folder a claim
+    created), while they are empty; nothing when ``created`` is None."""
     if created is None:
         return
-    for d in (out.absolute(), *out.absolute().parents):
+    for d in (folder, *folder.parents):
         try:
             d.rmdir()
         except OSError:
@@ -430,7 +667,7 @@ def run_folder(
             a run of ``command`` with ``args`` and ``overwrite`` is False; when ``out`` is
             a file; or when it contains the working directory and would be replaced.
     """
-    out = Path(out)
+    out = check_location(out)
     recover_stale(out)
     plain = _plain(dict(args))
     digest = _digest(command, plain)
@@ -468,16 +705,20 @@ def run_folder(
             "started_utc": _now(),
             "finished_utc": None,
         }
-        write_text_atomic(out / RUN_MANIFEST, json.dumps(manifest, indent=2))
     run = RunFolder(out, state, manifest)
     try:
+        if state != "resumed":
+            write_text_atomic(out / RUN_MANIFEST, json.dumps(manifest, indent=2))
         yield run
-    except BaseException:
+    except BaseException as exc:
         if state == "replacing":
             _remove(out)
             os.replace(replaced, out)
-        elif state == "new" and [p.name for p in out.iterdir()] == [RUN_MANIFEST]:
+        elif state == "new" and _disk_full(exc):
+            _drop_partial(out, created)
+        elif state == "new" and [p.name for p in out.iterdir()] in ([RUN_MANIFEST], []):
             _unclaim(out, created)
+        _note_interrupt(exc, lambda: _run_note(out, state))
         raise
     run.manifest["finished_utc"] = _now()
     write_text_atomic(out / RUN_MANIFEST, json.dumps(run.manifest, indent=2, default=str))

@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 import scipy.io
 from pydantic import Field, ValidationError
 
-from parknss.config import StrictModel
+from parknss.config import StrictModel, read_json
 from parknss.data.assemble import Assembled, LogRead, assemble
 from parknss.data.canlog import CAN_SUFFIXES
 from parknss.data.mapping import (
@@ -48,7 +48,7 @@ from parknss.data.trial import UNLABELLED, Campaign, Trial
 from parknss.data.validate import TrialDataError, load_validation_config, validate_trial
 from parknss.data.workflows import campaign_channels
 from parknss.errors import DataError, one_line
-from parknss.outputs import artefact_folder
+from parknss.outputs import artefact_folder, safe_stem
 from parknss.signals import (
     CHANNEL_BY_NAME,
     REQUIRED_CHANNELS,
@@ -641,6 +641,7 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, overwrite: bool =
         if not _SAFE_ID.match(str(tr.id)) or tr.id in seen:
             why = "duplicate" if tr.id in seen else "unsafe as a file name"
             raise DataError(f"{out}: trial id {tr.id!r} is {why}")
+        safe_stem(tr.id, what=f"{out}: trial id")  # bounded length
         seen.add(tr.id)
     present = campaign_channels(campaign) if len(campaign) else REQUIRED_CHANNELS
     if "t" not in present:
@@ -685,10 +686,7 @@ def _read_index(folder: Path) -> CampaignIndex:
             "(bring raw logs in with `parknss campaign import`)"
         )
     _nonempty(jpath)
-    try:
-        doc = json.loads(jpath.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise DataError(f"{jpath}: not valid JSON ({one_line(exc)})") from exc
+    doc = read_json(jpath, DataError)  # depth-limited, unreadable: one line
     try:
         index = CampaignIndex.model_validate(doc)
     except ValidationError as exc:

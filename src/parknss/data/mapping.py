@@ -34,10 +34,9 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import yaml
 from pydantic import Field, ValidationError, field_validator, model_validator
 
-from parknss.config import StrictModel
+from parknss.config import StrictModel, parse_yaml
 from parknss.errors import ConfigError
 from parknss.signals import (
     CHANNEL_BY_NAME,
@@ -47,6 +46,7 @@ from parknss.signals import (
     unit_dimension,
 )
 from parknss.vehicle import VehicleGeometry
+from parknss.vehicle_ranges import check_vehicle
 
 Interpolation = Literal["auto", "linear", "hold"]
 ABSENT = "absent"  # YAML shorthand: ``torque_cmd: absent``
@@ -243,6 +243,10 @@ class VehicleInfo(StrictModel):
             unknown = sorted(set(v) - set(VehicleGeometry.__dataclass_fields__))
             if unknown:
                 raise ValueError(f"unknown geometry field(s) {unknown}")
+            try:
+                check_vehicle(v, "vehicle.geometry")
+            except ConfigError as exc:
+                raise ValueError(str(exc)) from exc
         return v
 
 
@@ -433,8 +437,8 @@ def load_mapping(path: str | Path) -> ChannelMapping:
     if not p.is_file():
         raise ConfigError(f"{p}: mapping file not found")
     try:
-        doc = yaml.safe_load(p.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        doc = parse_yaml(p.read_text(), str(p))  # depth-limited
+    except UnicodeDecodeError as exc:
         raise ConfigError(f"{p}: not valid YAML ({exc.__class__.__name__})") from exc
     if not isinstance(doc, dict):
         raise ConfigError(f"{p}: expected a mapping at top level")

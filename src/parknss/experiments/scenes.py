@@ -6,14 +6,16 @@ the same scene, plants and configs may write into it again; anything else there 
 refused unless ``overwrite``) and writes every file atomically. Without ``out`` the one-
 scene runs write to ``runs/plan/<scene>`` and ``runs/simulate/<scene>``, one folder per
 scene, so planning or driving scene after scene needs no ``--overwrite``; ``plan --grid``
-writes only with ``out``.
+writes only with ``out``. The scene's name becomes part of file and folder names only
+through :func:`parknss.outputs.safe_stem`, checked before any planning, and every file is
+checked to lie inside the run folder (:func:`parknss.outputs.inside`).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from parknss.outputs import run_folder
+from parknss.outputs import default_run_folder, run_folder, safe_stem
 from parknss.report.plan_figure import draw_plan
 from parknss.report.sim_figures import draw_scene_run
 from parknss.sim import scenarios as sc
@@ -46,7 +48,8 @@ def plan_one(
     ``out``, write ``plan_<scene>.json``; the plan summary with the figure's path."""
     files = files or SimConfigFiles()
     scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
-    folder = out or Path("runs") / "plan" / scene.meta.name
+    name = safe_stem(scene.meta.name, what="scene name")  # before the work
+    folder = out or default_run_folder("plan", name, what="scene name")
     identity = {"scene": _scene_arg(spec), "refine": refine,
                 "closed_loop_overrides": closed_loop_overrides, **config_paths(files)}
     with run_folder(folder, command="parknss plan", args=identity, overwrite=overwrite) as run:
@@ -56,14 +59,14 @@ def plan_one(
         summary = plan.to_json(scene)
         if scene.notes:
             summary["scene_notes"] = list(scene.notes)
-        png = folder / f"plan_{scene.meta.name}.png"
+        png = run.file(f"plan_{name}.png")
         summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse,
                                           refined=plan.refinement, geom=geom))
         if Path(str(spec)).suffix.lower() in (".csv", ".xml"):  # an imported scene
-            summary["scene_json"] = str(run.write_json(f"scene_{scene.meta.name}.json",
+            summary["scene_json"] = str(run.write_json(f"scene_{name}.json",
                                                        scene.to_json()))
         if out is not None:
-            run.write_json(f"plan_{scene.meta.name}.json", summary)
+            run.write_json(f"plan_{name}.json", summary)
     return summary
 
 
@@ -111,7 +114,8 @@ def simulate_one(
     files = files or SimConfigFiles()
     check_plants(plants, files.closed_loop_config(), files.vehicle_geometry())  # fail fast
     scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
-    folder = out or Path("runs") / "simulate" / scene.meta.name
+    name = safe_stem(scene.meta.name, what="scene name")  # before the work
+    folder = out or default_run_folder("simulate", name, what="scene name")
     identity = {"scene": _scene_arg(spec), "plants": plants, "series": series,
                 **config_paths(files)}
     with run_folder(folder, command="parknss simulate", args=identity,
@@ -123,5 +127,5 @@ def simulate_one(
             doc["figures"] = figures
             if series:
                 doc["series"] = scene_run.write_series(folder)
-        run.write_json(f"simulate_{doc['scene']}.json", doc)
+        run.write_json(f"simulate_{name}.json", doc)
     return doc

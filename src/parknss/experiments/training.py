@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from parknss.experiments.folds import fold_config
+from parknss.nss import train_state
 from parknss.nss.campaigns import load_campaign
 from parknss.nss.checkpoint import save_model
 from parknss.nss.train import fit, geometry_of
-from parknss.outputs import artefact_folder, check_writable
+from parknss.outputs import artefact_folder, check_writable, keep_on_interrupt
 from parknss.report.nss_figures import draw_history
 
 
@@ -34,6 +35,16 @@ class TrainInputs:
     overwrite: bool = False
 
 
+def _kept(out: Path) -> str:
+    """What an interrupted ``parknss train`` keeps and how to resume it, for one line."""
+    state = out / "state"
+    if train_state.exists(state):
+        return (f"training state kept in {state}; resume with "
+                f"`parknss train --out {out} --resume` (and the same --data/--config/--set)")
+    return (f"no training state saved yet in {state}; start again with "
+            f"`parknss train --out {out} --overwrite`")
+
+
 def train_deployment(inputs: TrainInputs) -> tuple[dict, str]:
     """Fit and write (see the module doc); (the JSON document, a one-line summary)."""
     out = inputs.out
@@ -43,10 +54,11 @@ def train_deployment(inputs: TrainInputs) -> tuple[dict, str]:
         check_writable(out, overwrite=inputs.overwrite, kind="model")
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(cfg.model_dump(mode="json"), indent=2))
-    res = fit(
-        list(campaign), [], cfg, geometry_of(campaign), out_dir=out / "state",
-        resume=inputs.resume,
-    )
+    with keep_on_interrupt(lambda: _kept(out)):
+        res = fit(
+            list(campaign), [], cfg, geometry_of(campaign), out_dir=out / "state",
+            resume=inputs.resume,
+        )
     model_dir = out / "model"
     with artefact_folder(model_dir, overwrite=True, kind="model") as tmp:
         save_model(tmp, res.model, cfg, res.training_meta())

@@ -32,7 +32,7 @@ from parknss.chain.native import build_shared
 from parknss.config import SHIPPED_CHAIN
 from parknss.errors import ParknssError
 from parknss.export.fmi2_source import INPUTS, OUTPUTS, VARIABLES, wrapper_source
-from parknss.outputs import OutputExistsError, atomic_file
+from parknss.outputs import atomic_file, check_file_target
 
 MODEL_ID = "parknss_chain"
 WRAPPER = "fmi2_chain.c"
@@ -127,8 +127,7 @@ def export_fmu(out: str | Path, chain_dir: str | Path | None = None,
     out = Path(out)
     if out.suffix != ".fmu":
         raise ParknssError(f"{out}: an FMU file name ends in .fmu")
-    if out.exists() and not overwrite:
-        raise OutputExistsError(f"{out}: already exists (pass --overwrite to replace it)")
+    out = check_file_target(out, overwrite=overwrite)  # before any work
     plat = _platform()
     src_dir = Path(chain_dir) if chain_dir is not None else SHIPPED_CHAIN
     dep = load_chain(src_dir)

@@ -49,7 +49,7 @@ from parknss.actuators.steppers import (
 from parknss.chain.realtime import NumpyNSS, RealtimeChain
 from parknss.errors import CheckpointError, ParknssError
 from parknss.nss.nets import NumpyLayers
-from parknss.outputs import OutputExistsError, atomic_file
+from parknss.outputs import atomic_file, check_file_target
 from parknss.signals import DT, kmh_to_ms
 
 OPSET = 17
@@ -359,9 +359,7 @@ def export_onnx(out: str | Path, model_dir: str | Path | None = None,
     ``overwrite``), checked by ``onnx.checker``."""
     import onnx
 
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise OutputExistsError(f"{out}: already exists (pass --overwrite to replace it)")
+    out = check_file_target(out, overwrite=overwrite)  # before any work
     mod, n_state, names, kind = step_module(model_dir, chain_dir)
     buf = io.BytesIO()
     args = (torch.zeros(n_state), torch.zeros(4))

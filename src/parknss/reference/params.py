@@ -20,6 +20,7 @@ from parknss.config import StrictModel, load_config, override
 from parknss.reference.conditions import ConditionsConfig
 from parknss.signals import BLIND_ZONE_KMH
 from parknss.vehicle import VehicleGeometry
+from parknss.vehicle_ranges import check_vehicle
 
 
 class GeometryParams(StrictModel):
@@ -217,5 +218,11 @@ class ReferenceVehicleParams(StrictModel):
 
 def load_vehicle_params(path: str | Path | None = None) -> ReferenceVehicleParams:
     """Read reference-vehicle parameters from ``path`` (default: the shipped
-    configs/reference_vehicle.yaml)."""
-    return load_config(ReferenceVehicleParams, path, default="reference_vehicle.yaml")
+    configs/reference_vehicle.yaml); geometry, mass, wheel radius and drive/brake limits
+    outside their physical ranges (:mod:`parknss.vehicle_ranges`) are refused in one line."""
+    params = load_config(ReferenceVehicleParams, path, default="reference_vehicle.yaml")
+    check_vehicle({**params.geometry.model_dump(), **params.body.model_dump(),
+                   "torque_max_nm": params.drive.torque_max_nm,
+                   "pressure_max_bar": params.brake.pressure_max_bar},
+                  str(path) if path is not None else "reference_vehicle.yaml")
+    return params

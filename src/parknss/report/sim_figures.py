@@ -9,6 +9,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from parknss.outputs import inside, safe_stem
 from parknss.report.plan_figure import finish_scene, outline, scene_axes
 from parknss.report.style import save, shade_reverse
 from parknss.signals import ms_to_kmh, rad_to_deg
@@ -113,11 +114,10 @@ def draw_scene_run(run: SceneRun, out: str | Path) -> dict[str, str]:
     ``fig9_...`` in ``out``; {"fig8": path, "fig9": path}, or {} when not plannable."""
     if run.plan.trajectory is None:
         return {}
-    out = Path(out)
     runs = {o.plant: o.series for o in run.outcomes}
-    name, tag = run.scene.meta.name, "_vs_".join(runs)
+    name, tag = safe_stem(run.scene.meta.name, what="scene name"), "_vs_".join(runs)
     fig8 = draw_driven(
-        run.scene, run.plan.trajectory, runs, out / f"fig8_{name}_{tag}.png", run.geom
+        run.scene, run.plan.trajectory, runs, inside(out, f"fig8_{name}_{tag}.png"), run.geom
     )
-    fig9 = draw_states(runs, out / f"fig9_{name}_{tag}.png", title=name)
+    fig9 = draw_states(runs, inside(out, f"fig9_{name}_{tag}.png"), title=name)
     return {"fig8": str(fig8), "fig9": str(fig9)}

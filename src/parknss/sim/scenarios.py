@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from parknss.config import StrictModel, load_config
+from parknss.config import StrictModel, load_config, read_json
 from parknss.errors import ConfigError, PlanningError
 from parknss.sim.geometry import convex_polygon, rectangle
 from parknss.sim.obstacles import (
@@ -218,10 +218,7 @@ class Scene:
         p = Path(path)
         if not p.is_file():
             raise PlanningError(f"{p}: scene file not found")
-        try:
-            data = json.loads(p.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise PlanningError(f"{p}: not valid JSON ({exc.__class__.__name__})") from exc
+        data = read_json(p, PlanningError)  # depth-limited, unreadable: one line
         return _scene_from_json(data, str(p), cfg)
 
     def save(self, path: str | Path) -> Path:

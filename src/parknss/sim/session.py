@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parknss.outputs import atomic_file
+from parknss.outputs import atomic_file, inside, safe_stem
 from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import (
     ClosedLoopConfig,
@@ -128,7 +128,8 @@ class SceneRun:
         ``out``; {plant: path}."""
         paths = {}
         for o in self.outcomes:
-            p = out / f"series_{self.scene.meta.name}_{o.plant}.csv"
+            name = safe_stem(self.scene.meta.name, what="scene name")
+            p = inside(out, f"series_{name}_{o.plant}.csv")
             write_series(o.series, p)
             paths[o.plant] = str(p)
         return paths

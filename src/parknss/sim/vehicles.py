@@ -3,7 +3,8 @@
 The geometry of a run is, in this order:
 
 1. the vehicle YAML the user names (``--vehicle FILE.yaml``, ``vehicle`` of the web
-   config; :func:`parknss.vehicle.load_vehicle_geometry`);
+   config; :func:`parknss.vehicle.load_vehicle_geometry`), its values within the
+   physical ranges of :mod:`parknss.vehicle_ranges`;
 2. else the geometry stored in the chain artefact the closed-loop config names (the car
    whose campaign the NSS and the chain were identified on; ``nss/model.json`` of the
    chain folder, read without loading a network);
@@ -23,6 +24,7 @@ from pathlib import Path
 from parknss.config import SHIPPED_CHAIN
 from parknss.errors import CheckpointError
 from parknss.vehicle import VehicleGeometry, load_vehicle_geometry, same_geometry
+from parknss.vehicle_ranges import check_vehicle
 
 
 def chain_geometry(path: str | Path | None = None) -> VehicleGeometry | None:
@@ -43,7 +45,9 @@ def resolve_vehicle(
     """The geometry of a run (module docstring): ``vehicle`` YAML, else the chain's, else
     the default car."""
     if vehicle is not None:
-        return load_vehicle_geometry(vehicle)
+        geom = load_vehicle_geometry(vehicle)
+        check_vehicle(geom.to_dict(), str(vehicle))  # physical ranges, one line
+        return geom
     return chain_geometry(chain_path) or VehicleGeometry()
 
 
