@@ -134,6 +134,8 @@ class SimulatorService:
             grids=dict(GRID_SIZES),
             planned_colour=self.cfg.planned_colour,
             accel_smoothing_s=self.cfg.accel_smoothing_s,
+            plan_budget_s=self.cfg.plan_budget_s,
+            simulate_budget_s=self.cfg.simulate_budget_s,
         )
 
     def grid_scene(self, grid: str, index: int) -> sc.Scene:
