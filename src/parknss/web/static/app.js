@@ -784,6 +784,9 @@ function drawCollision(ctx, run) {
   ctx.stroke();
   ctx.fillStyle = COLLISION_COLOUR;
   ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.strokeStyle = "#fff";
+  ctx.lineWidth = 3;
+  ctx.strokeText(`${run.plant}: collision`, X + 12, Y - 10); // a halo over the car fill
   ctx.fillText(`${run.plant}: collision`, X + 12, Y - 10);
   ctx.restore();
   run.contact = [cx, cy];
