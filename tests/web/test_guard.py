@@ -170,8 +170,8 @@ def test_a_500_keeps_the_connection_alive():
 
 
 def _large_body() -> bytes:
-    """A ~10 MB valid JSON request dense in numbers (a scene too large to plan: 422)."""
-    vertices = [[0.123456, 7]] * 600_000
+    """A ~12 MB valid JSON request dense in numbers (a scene too large to plan: 422)."""
+    vertices = [[0.123456, 7]] * 800_000
     scene = {"bounds": [0, 0, 1, 1], "obstacles": [{"vertices": vertices}],
              "start": [0, 0, 0], "goal": [0, 0, 0]}
     return json.dumps({"scene": scene}).encode()
@@ -215,5 +215,7 @@ def test_health_answers_while_a_large_body_is_parsed():
         health.close()
     assert result["status"] == 422 and "max_vertices" in result["doc"]["error"]
     assert len(latencies) >= 3, (latencies, large_s)
-    # parsed on the event loop, one health call would wait out the whole parse
-    assert max(latencies) < 0.5 * plain_parse_s, (max(latencies), plain_parse_s, large_s)
+    # parsed on the event loop (or on a thread without the number hooks), a health call
+    # waits out the whole parse: measured 1.7x the plain parse time, against 0.2-0.55x
+    # here (health itself takes ~0.1 s and shares the loaded CPU and the GIL)
+    assert max(latencies) < plain_parse_s, (max(latencies), plain_parse_s, large_s)
