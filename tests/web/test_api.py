@@ -24,11 +24,12 @@ from parknss.web.payload import decimate_series, resample_poses
 CELL = 26  # angled-left-t1-open: one cusp, plans in a fraction of a second
 # generous wall-clock budgets (a loaded machine must not fail a test); a small cache
 BUDGETS = {"plan_budget_s": 300.0, "simulate_budget_s": 600.0, "plan_cache_size": 4}
+LOCAL = "http://localhost"  # TestClient's default Host, "testserver", is not this server
 
 
 @pytest.fixture(scope="module")
 def client():
-    with TestClient(create_app(load_web_config(**BUDGETS))) as c:
+    with TestClient(create_app(load_web_config(**BUDGETS)), base_url=LOCAL) as c:
         yield c
 
 
@@ -202,7 +203,7 @@ def test_missing_chain_is_a_clear_503(tmp_path):
     cfg_file = tmp_path / "closed_loop.yaml"
     cfg_file.write_text(f"chain_path: {tmp_path / 'no_chain_here'}\n")
     cfg = load_web_config(**BUDGETS, closed_loop_config=str(cfg_file))
-    with TestClient(create_app(cfg)) as c:
+    with TestClient(create_app(cfg), base_url=LOCAL) as c:
         msg = _error(c.post("/api/simulate", json={"index": CELL, "plant": "chain"}), 503, "chain")
         plants = {p["kind"]: p for p in c.get("/api/health").json()["plants"]}
         assert not plants["chain"]["available"] and plants["chain"]["reason"] == msg
@@ -232,7 +233,7 @@ def test_not_plannable_is_a_result_not_an_error(client):
 def test_over_budget_is_504_and_unexpected_errors_are_500_without_traceback():
     cfg = load_web_config(**{**BUDGETS, "simulate_budget_s": 0.001})
     app = create_app(cfg)
-    with TestClient(app, raise_server_exceptions=False) as c:
+    with TestClient(app, raise_server_exceptions=False, base_url=LOCAL) as c:
         _error(c.post("/api/simulate", json={"index": CELL}), 504, "budget of 0.001 s")
 
         def boom(_req):

@@ -10,6 +10,7 @@ install``: the system browser is used).
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
@@ -194,3 +195,154 @@ def test_a_scene_file_and_the_robustness_grid_are_planned(page, tmp_path):
     assert page.evaluate("state.plan.name") == "angled-left-t1-open-skew_pos"
     assert page.url.endswith(f"?grid=252&cell={CELL}")
     assert page.console_errors == []
+
+
+# --- issue 48: the rough edges of the page --------------------------------------------------
+
+L_CASE = "0,0,0,10,0,0,1,6,3,3,7,3,7,4,4,4,4,6,3,6\n"  # a TPCAP case with one L-shaped obstacle
+
+
+def _imported(page, path) -> None:
+    page.set_input_files("#scene-file", str(path))
+    page.wait_for_function(
+        "state.custom && document.querySelector('#busy').hidden && !state.planning && "
+        "(state.plan !== null || !document.querySelector('#error').hidden)"
+    )
+
+
+def test_an_imported_case_shows_its_notes_and_names_the_file(page, tmp_path):
+    _settled(page)
+    assert page.inner_text("#open-scene") == "Open scene file…"
+    assert page.is_hidden("#scene-notes")
+    case = tmp_path / "Case99.csv"
+    case.write_text(L_CASE)
+    _imported(page, case)
+    notes = page.inner_text("#scene-notes")
+    assert "Case99.csv" in notes and "split into 2 convex parts" in notes
+    grid_text = page.evaluate("$('grid').selectedOptions[0].textContent")
+    assert grid_text == "Scene file: Case99.csv"  # not "Scenario grid (36 cells)"
+    assert page.input_value("#cell") == "custom"
+    page.select_option("#cell", CELL)  # back to a grid cell: grid selector and notes follow
+    _settled(page)
+    assert page.input_value("#grid") == "36" and page.is_hidden("#scene-notes")
+    page.select_option("#grid", "file")  # and to the file again
+    page.wait_for_function("state.custom && document.querySelector('#busy').hidden")
+    assert "split into 2 convex parts" in page.inner_text("#scene-notes")
+    assert not [e for e in page.console_errors if "page error" in e]
+
+
+def test_tpcap_obstacles_are_drawn_inside_the_map_frame(page, tmp_path):
+    """A TPCAP map is the start/goal box widened by 8 m; obstacles reach past it (Case13's
+    do), here a 17 m stripe from y = 3 m through the map's top edge at y = 8 m."""
+    case = tmp_path / "Case98.csv"
+    case.write_text("0,0,0,10,0,0,2,6,4,3,3,7,3,7,4,4,4,4,6,3,6,12,3,14,3,14,20,12,20\n")
+    _settled(page)
+    _imported(page, case)
+    assert page.evaluate("state.scene.bounds") == [-8.0, -8.0, 18.0, 8.0]
+    outside, inside = page.evaluate(
+        """() => {
+            const c = $("view");
+            const dpr = window.devicePixelRatio || 1;
+            const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+            const [x0, y0, x1, y1] = state.scene.bounds;
+            const L = sx(x0) * dpr - 2, R = sx(x1) * dpr + 2;
+            const T = sy(y1) * dpr - 2, B = sy(y0) * dpr + 2;
+            const fill = [0xbd, 0xc3, 0xc7];
+            let outside = 0, inside = 0;
+            for (let py = 0; py < c.height; py++) {
+                for (let px = 0; px < c.width; px++) {
+                    const i = (py * c.width + px) * 4;
+                    if (Math.abs(d[i] - fill[0]) > 3 || Math.abs(d[i + 1] - fill[1]) > 3 ||
+                        Math.abs(d[i + 2] - fill[2]) > 3) continue;
+                    if (px < L || px > R || py < T || py > B) outside++; else inside++;
+                }
+            }
+            return [outside, inside];
+        }"""
+    )
+    assert page.evaluate("state.scene.obstacles[0].kind") == "obstacle"
+    assert inside > 500 and outside == 0, (inside, outside)
+    page.screenshot(path=str(tmp_path / "tpcap_case13.png"), full_page=True)
+
+
+def test_the_time_label_runs_to_the_longest_run(page):
+    _settled(page)
+    page.uncheck("#plant-chain")
+    page.check("#plant-kinematic")
+    page.check("#plant-reference")
+    page.select_option("#speed", "8")
+    page.click("#run-btn")
+    page.wait_for_function(
+        "document.querySelectorAll('#outcome tbody tr').length === 2 && "
+        "document.querySelector('#busy').hidden"
+    )
+    ends = page.evaluate("state.runs.map(runEnd)")
+    assert len(ends) == 2 and ends[0] != ends[1]
+    label = page.inner_text("#time")
+    assert label.endswith(f"/ {max(ends):.1f} s"), (label, ends)
+    title = page.get_attribute("#time", "title")
+    assert f"kinematic {ends[0]:.1f} s" in title and f"reference {ends[1]:.1f} s" in title
+    # the playback runs to the longest run's end, whichever plant finished first
+    page.wait_for_function("!state.playing", timeout=120_000)
+    assert page.evaluate("state.t") == pytest.approx(max(ends))
+    assert page.inner_text("#time") == f"{max(ends):.1f} / {max(ends):.1f} s"
+
+
+def test_a_collision_is_marked_where_the_car_hit(page):
+    """The page's marker for a run the server reports as a collision: the run's last pose
+    moved into obstacle 0 (a real collision needs a tracker that fails, which the shipped
+    ones do not on the grid)."""
+    _settled(page)
+    for kind in ("chain", "reference"):
+        page.uncheck(f"#plant-{kind}")
+    page.check("#plant-kinematic")
+    page.click("#run-btn")
+    page.wait_for_function(
+        "state.runs.length === 1 && document.querySelector('#busy').hidden"
+    )
+    red_before = _pixels_like(page, "#view", "#e60000", tol=30)
+    contact, box = page.evaluate(
+        """() => {
+            const run = state.runs[0];
+            const s = run.series, n = s.t.length - 1;
+            const v = state.scene.obstacles[0].vertices;
+            const xs = v.map((p) => p[0]), ys = v.map((p) => p[1]);
+            s.x[n] = (Math.min(...xs) + Math.max(...xs)) / 2;
+            s.y[n] = Math.max(...ys) + 0.5;  // the car's outline crosses the obstacle's top
+            s.heading[n] = 0;
+            run.outcome.reason = "collision";
+            state.playing = false;
+            render();
+            return [run.contact, [Math.min(...xs), Math.min(...ys), Math.max(...xs),
+                                  Math.max(...ys)]];
+        }"""
+    )
+    assert contact is not None
+    assert box[0] - 0.01 <= contact[0] <= box[2] + 0.01
+    assert box[1] - 0.01 <= contact[1] <= box[3] + 0.5
+    assert _pixels_like(page, "#view", "#e60000", tol=30) > red_before + 100
+
+
+def test_a_plan_shows_its_progress_and_can_be_cancelled(page):
+    _settled(page)
+    held = []
+    page.route("**/api/plan", lambda route: held.append(route))  # the answer never comes
+    page.click("#plan-btn")
+    page.wait_for_function("!document.querySelector('#busy').hidden")
+    page.wait_for_timeout(1600)
+    text = page.inner_text("#busy-text")
+    assert text.startswith("planning…") and "of at most 300 s" in text
+    assert int(text.split("…")[1].split()[0]) >= 1  # the seconds count up
+    assert page.is_disabled("#run-btn")
+    page.click("#cancel")
+    assert page.is_hidden("#busy") and page.is_enabled("#run-btn")
+    assert "cancelled" in page.inner_text("#plan-info")
+    assert "in the background" in page.inner_text("#error")
+    page.unroute("**/api/plan")
+    for route in held:
+        with contextlib.suppress(Exception):  # the page already dropped the request
+            route.abort()
+    page.click("#plan-btn")  # and planning works again
+    _settled(page)
+    assert "planned" in page.inner_text("#plan-info")
+    assert not [e for e in page.console_errors if "page error" in e]

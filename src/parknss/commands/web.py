@@ -2,7 +2,8 @@
 
 Starts the FastAPI app of :mod:`parknss.web.app` with uvicorn on ``--host``/``--port``
 (defaults from configs/web.yaml) and, with ``--open``, opens the page in the default
-browser once the server is up. Stop it with Ctrl-C.
+browser once the server is up. Stop it with Ctrl-C. Off loopback it warns and requires
+an access token (``--token`` or ``PARKNSS_WEB_TOKEN``); see docs/web.md, "The network".
 """
 
 from __future__ import annotations
@@ -30,17 +31,34 @@ def register(app: typer.Typer) -> None:
         vehicle: Path | None = typer.Option(
             None, "--vehicle", help="Vehicle YAML (web.yaml: the chain's car)."
         ),
+        token: str | None = typer.Option(
+            None,
+            "--token",
+            envvar="PARKNSS_WEB_TOKEN",
+            show_envvar=True,
+            help="Access token every request must carry (required off loopback).",
+        ),
     ) -> None:
         """Serve the interactive parking simulator (plan, run, play back) in the browser."""
         import uvicorn
 
         from parknss.web.app import create_app
         from parknss.web.config import load_web_config
+        from parknss.web.guard import exposure_warning
 
-        given = (("host", host), ("port", port), ("vehicle", vehicle and str(vehicle)))
+        given = (
+            ("host", host),
+            ("port", port),
+            ("vehicle", vehicle and str(vehicle)),
+            ("token", token),
+        )
         overrides = {k: v for k, v in given if v is not None}
         cfg = load_web_config(config, **overrides)
-        url = f"http://{cfg.host}:{cfg.port}/"
+        warning = exposure_warning(cfg.host, cfg.token)
+        if warning:
+            _log(warning)
+        shown = f"[{cfg.host}]" if ":" in cfg.host else cfg.host
+        url = f"http://{shown}:{cfg.port}/"
         server = uvicorn.Server(
             uvicorn.Config(create_app(cfg), host=cfg.host, port=cfg.port, log_level="warning")
         )
@@ -50,7 +68,7 @@ def register(app: typer.Typer) -> None:
                 while not server.started and not server.should_exit:
                     threading.Event().wait(0.1)
                 if server.started:
-                    webbrowser.open(url)
+                    webbrowser.open(url + (f"?token={cfg.token}" if cfg.token else ""))
 
             threading.Thread(target=_open_when_up, daemon=True).start()
         _log(f"serving the simulator at {url} (Ctrl-C stops it)")

@@ -9,15 +9,18 @@ Endpoints (docs/web.md has examples):
 * ``POST /api/simulate``: plan (or reuse the plan) and execute it through one plant.
 * ``POST /api/import``: a TPCAP case (.csv) or CommonRoad scenario (.xml) as scene JSON.
 
-Every error is JSON ``{"error": "<one line>", "status": <code>}``: 400 malformed JSON,
-422 invalid request (unknown plant, cell out of range, non-finite numbers, bad
-polygons, start pose in collision), 503 plant unavailable or server busy, 504 over the
-wall-clock budget. Unexpected failures are logged and answered 500 without a traceback.
+Every error is JSON ``{"error": "<one line>", "status": <code>}``: 400 malformed JSON or
+a Host header that does not name the server, 401 no token (when one is set), 413 body
+over ``max_body_bytes``, 422 invalid request (unknown plant, cell out of range,
+non-finite or out-of-range numbers, bad polygons, start pose in collision), 503 plant
+unavailable or server busy, 504 over the wall-clock budget. Unexpected failures are
+logged and answered 500 without a traceback, on a connection that stays open
+(:mod:`parknss.web.guard`). POST bodies are decoded off the event loop
+(:mod:`parknss.web.bodies`).
 """
 
 from __future__ import annotations
 
-import logging
 from contextlib import asynccontextmanager
 from pathlib import Path
 
@@ -29,8 +32,10 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 import parknss
 from parknss.errors import ParknssError
+from parknss.web.bodies import openapi_body, parse_body
 from parknss.web.config import WebConfig, load_web_config
 from parknss.web.errors import WebError
+from parknss.web.guard import Guard, HostPolicy
 from parknss.web.jobs import ComputeRunner
 from parknss.web.schemas import (
     CellList,
@@ -48,10 +53,10 @@ from parknss.web.schemas import (
 from parknss.web.service import SimulatorService
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
-log = logging.getLogger("parknss.web")
 
 _ERRORS = {
     400: {"model": ErrorResponse},
+    413: {"model": ErrorResponse},
     422: {"model": ErrorResponse},
     503: {"model": ErrorResponse},
     504: {"model": ErrorResponse},
@@ -94,10 +99,8 @@ def _install_error_handlers(app: FastAPI) -> None:
     async def _http(_req: Request, exc: StarletteHTTPException) -> JSONResponse:
         return _error(exc.status_code, str(exc.detail))
 
-    @app.exception_handler(Exception)
-    async def _unexpected(req: Request, exc: Exception) -> JSONResponse:
-        log.exception("unexpected error in %s %s", req.method, req.url.path)
-        return _error(500, f"internal error ({type(exc).__name__}); see the server log")
+    # exceptions nothing above handles reach parknss.web.guard.Guard: logged, 500 JSON,
+    # and the connection stays open (an Exception handler here would re-raise to uvicorn)
 
 
 def create_app(config: WebConfig | None = None) -> FastAPI:
@@ -122,6 +125,12 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
     app.state.service = service
     app.state.runner = runner
     _install_error_handlers(app)
+    app.add_middleware(
+        Guard,
+        hosts=HostPolicy(cfg.host, cfg.allowed_hosts),
+        token=cfg.token,
+        max_body_bytes=cfg.max_body_bytes,
+    )
 
     @app.get("/api/health", response_model=Health)
     def health() -> Health:  # not queued behind long plans and runs
@@ -135,17 +144,24 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
     def scene(index: int, grid: Grid = "36") -> SceneResponse:
         return service.scene_response(grid, index)
 
-    @app.post("/api/import", response_model=ImportResponse, responses=_ERRORS)
-    async def import_scene(req: ImportRequest) -> ImportResponse:
-        return await runner.run(cfg.plan_budget_s, "the import", service.import_scene, req)
+    def _post(path: str, model, response_model, budget_s: float, what: str, method: str):
+        """POST ``path``: the body decoded as ``model`` off the event loop, then
+        ``service.<method>`` on the compute pool within ``budget_s``."""
 
-    @app.post("/api/plan", response_model=PlanResponse, responses=_ERRORS)
-    async def plan(req: SceneRequest) -> PlanResponse:
-        return await runner.run(cfg.plan_budget_s, "planning", service.plan_request, req)
+        async def endpoint(request: Request):
+            req = await parse_body(request, model)
+            return await runner.run(budget_s, what, getattr(app.state.service, method), req)
 
-    @app.post("/api/simulate", response_model=SimulateResponse, responses=_ERRORS)
-    async def simulate(req: SimulateRequest) -> SimulateResponse:
-        return await runner.run(cfg.simulate_budget_s, "the simulation", service.simulate, req)
+        endpoint.__name__ = method
+        app.post(path, response_model=response_model, responses=_ERRORS,
+                 openapi_extra=openapi_body(model))(endpoint)
+
+    _post("/api/import", ImportRequest, ImportResponse, cfg.plan_budget_s, "the import",
+          "import_scene")
+    _post("/api/plan", SceneRequest, PlanResponse, cfg.plan_budget_s, "planning",
+          "plan_request")
+    _post("/api/simulate", SimulateRequest, SimulateResponse, cfg.simulate_budget_s,
+          "the simulation", "simulate")
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:

@@ -23,6 +23,22 @@ class WebConfig(StrictModel):
     max_pending: int = Field(4, ge=1, description="computations queued or running before 503")
     plan_budget_s: float = Field(120.0, gt=0, description="wall-clock budget of a plan, s")
     simulate_budget_s: float = Field(300.0, gt=0, description="wall-clock budget of a run, s")
+    max_body_bytes: int = Field(
+        8 * 1024 * 1024, ge=1024, description="largest request body, bytes (413 beyond)"
+    )
+    max_coordinate_m: float = Field(
+        1000.0, gt=0, description="coordinates of bounds, obstacles and poses within ±this, m"
+    )
+    max_heading_rad: float = Field(100.0, gt=0, description="headings within ±this, rad")
+    token: str | None = Field(
+        None,
+        min_length=8,
+        pattern=r"^[A-Za-z0-9._~-]+$",
+        description="access token, 8+ URL-safe characters (required off loopback)",
+    )
+    allowed_hosts: list[str] = Field(
+        default_factory=list, description="Host header names accepted besides the bound ones"
+    )
     plan_cache_size: int = Field(32, ge=1, description="plans kept, keyed by scene")
     series_rate_hz: float = Field(25.0, gt=0, le=100, description="series rate sent, Hz")
     max_series_points: int = Field(4000, ge=10, description="max samples sent per run")

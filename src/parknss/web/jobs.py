@@ -15,7 +15,7 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
-from parknss.web.errors import BusyError, OverBudgetError
+from parknss.web.errors import BusyError, OverBudgetError, WebError
 
 T = TypeVar("T")
 
@@ -48,6 +48,10 @@ class ComputeRunner:
         fut.add_done_callback(self._done)
         try:
             return await asyncio.wait_for(asyncio.wrap_future(fut), budget_s)
+        except MemoryError as exc:  # a scene too large for this server is the user's input
+            raise WebError(
+                f"{what} ran out of memory on the server: make the map (bounds) smaller", 422
+            ) from exc
         except TimeoutError as exc:
             raise OverBudgetError(
                 f"{what} exceeded the server's budget of {budget_s:g} s; it finishes in the "

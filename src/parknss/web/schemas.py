@@ -91,6 +91,8 @@ class Health(BaseModel):
     grids: dict[str, int]
     planned_colour: str
     accel_smoothing_s: float = Field(description="window of the page's smoothed ax/ay, s")
+    plan_budget_s: float = Field(description="wall-clock budget of a plan request, s")
+    simulate_budget_s: float = Field(description="wall-clock budget of a simulate request, s")
 
 
 class CellInfo(BaseModel):

@@ -34,7 +34,7 @@ from parknss.sim.scene_formats import read_scene_file
 from parknss.sim.session import build_plant, not_plannable, run_cell
 from parknss.sim.vehicles import resolve_vehicle
 from parknss.vehicle import VehicleGeometry
-from parknss.web import payload
+from parknss.web import payload, scene_checks
 from parknss.web.config import WebConfig
 from parknss.web.errors import BadSceneError, PlantUnavailableError
 from parknss.web.schemas import (
@@ -134,6 +134,8 @@ class SimulatorService:
             grids=dict(GRID_SIZES),
             planned_colour=self.cfg.planned_colour,
             accel_smoothing_s=self.cfg.accel_smoothing_s,
+            plan_budget_s=self.cfg.plan_budget_s,
+            simulate_budget_s=self.cfg.simulate_budget_s,
         )
 
     def grid_scene(self, grid: str, index: int) -> sc.Scene:
@@ -178,9 +180,13 @@ class SimulatorService:
     def resolve(self, req: SceneRequest) -> sc.Scene:
         """The scene of a request, with its start replaced if given; BadSceneError when the
         scene is malformed or the start pose is off the map or touches an obstacle."""
+        limits = self.cfg.max_coordinate_m, self.cfg.max_heading_rad
+        if req.start is not None:
+            scene_checks.check_pose(req.start, "start", *limits)
         if req.index is not None:
             scene = self.grid_scene(req.grid, req.index)
         else:
+            scene_checks.check_scene_json(req.scene, *limits)
             try:
                 scene = sc.Scene.from_json(req.scene, "scene", self.scenarios.obstacles)
             except ParknssError as exc:
@@ -206,7 +212,9 @@ class SimulatorService:
                 raise BadSceneError(str(exc).replace(str(path), req.filename)) from exc
         meta = replace(scene.meta, source=req.filename)
         notes = [n.replace(str(path), req.filename) for n in scene.notes]
-        return ImportResponse(scene=replace(scene, meta=meta).to_json(), notes=notes)
+        doc = replace(scene, meta=meta).to_json()
+        scene_checks.check_scene_json(doc, self.cfg.max_coordinate_m, self.cfg.max_heading_rad)
+        return ImportResponse(scene=doc, notes=notes)
 
     def check_start(self, scene: sc.Scene) -> None:
         """BadSceneError when the car at the start pose is off the map or hits an obstacle."""

@@ -8,6 +8,7 @@ const DEG_PER_RAD = 180 / Math.PI;
 const OBSTACLE_FILL = { car: "#a9b4c0", curb: "#7f8c8d", barrier: "#c0392b" };
 const HANDLE_AHEAD_M = 0.9; // rotation handle ahead of the front bumper, m
 const HANDLE_RADIUS_PX = 8;
+const COLLISION_COLOUR = "#e60000";
 
 const PLOTS = {
   vx: { label: "vx [km/h] · dashed: speed request", scale: KMH_PER_MS, command: "speed_req" },
@@ -42,6 +43,10 @@ const state = {
   smooth: false, // show ax, ay through a moving average
   drag: null,
   token: 0, // newest request; older answers are dropped
+  abort: null, // AbortController of the request in flight (the Cancel button)
+  busyTimer: null,
+  cancelled: false,
+  fileScene: null, // {scene, name, notes} of the last scene file opened
   view: null, // world -> canvas transform
 };
 
@@ -50,16 +55,22 @@ const $ = (id) => document.getElementById(id);
 // ---------------------------------------------------------------------------------------
 // API
 
-async function api(path, body) {
-  const opts = body === undefined ? {} : {
+async function api(path, body, signal) {
+  const opts = body === undefined ? { signal } : {
     method: "POST",
     headers: { "Content-Type": "application/json" },
     body: JSON.stringify(body),
+    signal,
   };
   let res;
   try {
     res = await fetch(path, opts);
   } catch (err) {
+    if (err.name === "AbortError") {
+      const e = new Error("cancelled");
+      e.cancelled = true;
+      throw e;
+    }
     throw new Error(`cannot reach the server (${err.message})`);
   }
   let doc = null;
@@ -87,9 +98,10 @@ function samePose(a, b) {
   return !!a && !!b && a.every((v, i) => Math.abs(v - b[i]) < 1e-9);
 }
 
-function showError(msg) {
+function showError(msg, info = false) {
   const box = $("error");
   box.textContent = msg;
+  box.classList.toggle("info", info);
   box.hidden = false;
 }
 
@@ -98,11 +110,49 @@ function clearError() {
   $("error").textContent = "";
 }
 
-function setBusy(text) {
+// The busy badge: what runs, for how long (s) against the server's budget, and Cancel.
+function setBusy(text, budgetS) {
+  clearInterval(state.busyTimer);
+  state.busyTimer = null;
   $("busy").hidden = !text;
-  $("busy").textContent = text || "";
   $("plan-btn").disabled = !!text;
   $("run-btn").disabled = !!text;
+  if (!text) return;
+  const t0 = performance.now();
+  const show = () => {
+    const s = ((performance.now() - t0) / 1000).toFixed(0);
+    $("busy-text").textContent = `${text} ${s} s` + (budgetS ? ` of at most ${budgetS} s` : "");
+  };
+  show();
+  state.busyTimer = setInterval(show, 500);
+}
+
+// A new AbortController for the request about to start (aborts the one before).
+function newRequest() {
+  if (state.abort) state.abort.abort();
+  state.abort = new AbortController();
+  return state.abort.signal;
+}
+
+// Cancel: stop waiting for the answer in flight and drop it. Server threads cannot be
+// interrupted, so the server finishes the computation in the background (a plan is then
+// cached: planning the same scene again answers at once).
+function cancelRequest() {
+  if (state.abort) state.abort.abort();
+  state.abort = null;
+  state.token++;
+  if (state.planning) state.plan = null; // the plan shown was for the scene before the edit
+  state.planning = false;
+  state.cancelled = true;
+  setBusy("");
+  renderPlanInfo();
+  render();
+  showError("cancelled: the server finishes the computation in the background " +
+    "(a plan is then cached, so planning this scene again answers at once)", true);
+}
+
+function budget(kind) {
+  return state.health ? state.health[`${kind}_budget_s`] : null;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -194,6 +244,7 @@ async function loadCell() {
 }
 
 function setScene(scene, custom) {
+  if (!custom) showNotes(null, []);
   state.scene = scene;
   state.custom = custom;
   state.baseStart = scene.start.slice();
@@ -212,11 +263,13 @@ function setScene(scene, custom) {
 async function plan() {
   clearError();
   const tok = ++state.token;
-  setBusy("planning…");
+  const signal = newRequest();
+  setBusy("planning…", budget("plan"));
   state.planning = true;
+  state.cancelled = false;
   renderPlanInfo();
   try {
-    const doc = await api("/api/plan", sceneRequest());
+    const doc = await api("/api/plan", sceneRequest(), signal);
     if (tok !== state.token) return;
     state.plan = doc;
     if (!doc.plannable) showError(`no plan: ${doc.reason}`);
@@ -252,25 +305,35 @@ async function runSelected() {
     return;
   }
   const tok = ++state.token;
+  const signal = newRequest();
+  state.cancelled = false;
   clearRuns();
   const errors = [];
-  for (const plant of plants) {
-    setBusy(`running ${plant}…`);
+  for (const [i, plant] of plants.entries()) {
+    const of = plants.length > 1 ? ` (${i + 1} of ${plants.length})` : "";
+    setBusy(`running ${plant}${of}…`, budget("simulate"));
     const req = { ...sceneRequest(), plant };
     if (seed !== null) req.seed = seed;
     try {
-      const doc = await api("/api/simulate", req);
+      const doc = await api("/api/simulate", req, signal);
       if (tok !== state.token) return;
       state.plan = doc.plan;
       renderPlanInfo();
       if (doc.series) {
+        // a playback that reached the end of the shorter runs goes on to the new end
+        const ended = state.runs.length > 0 && !state.playing && state.t >= state.tmax;
         state.runs.push({ plant, colour: plantColour(plant), outcome: doc.outcome, series: doc.series });
         state.tmax = Math.max(state.tmax, ...doc.series.t.filter((v) => v !== null));
+        if (state.runs.length === 1) startPlayback();
+        else if (ended) {
+          state.playing = true;
+          state.lastFrame = null;
+        }
+        updatePlayer();
       } else {
         errors.push(`${plant}: not plannable (${doc.plan.reason})`);
       }
       addOutcomeRow(plant, doc.outcome, null);
-      if (state.runs.length === 1 && doc.series) startPlayback();
     } catch (err) {
       if (tok !== state.token) return;
       errors.push(`${plant}: ${err.message}`);
@@ -340,7 +403,8 @@ function renderPlanInfo() {
   dl.textContent = "";
   const p = state.plan;
   const idle = state.scene ? "not planned" : "–";
-  const rows = !p ? [["status", state.planning ? "planning…" : idle]] : [
+  const status = state.planning ? "planning…" : state.cancelled ? "cancelled" : idle;
+  const rows = !p ? [["status", status]] : [
     ["scene", p.name],
     ["status", p.plannable ? "planned" : `no plan: ${p.reason}`],
     ["path", p.plannable ? `${fmt(p.length_m, 2)} m, ${p.cusps} cusp${p.cusps === 1 ? "" : "s"}` : "–"],
@@ -367,10 +431,17 @@ function startPlayback() {
   updatePlayer();
 }
 
+// The time label: playback time / end of the longest run; its tooltip has each run's end.
 function updatePlayer() {
   $("play").textContent = state.playing ? "❚❚" : "▶";
   $("scrub").value = state.tmax > 0 ? String(Math.round((state.t / state.tmax) * 1000)) : "0";
   $("time").textContent = `${state.t.toFixed(1)} / ${state.tmax.toFixed(1)} s`;
+  $("time").title = state.runs.map((r) => `${r.plant} ${runEnd(r).toFixed(1)} s`).join(" · ");
+}
+
+function runEnd(run) {
+  const ts = run.series.t;
+  return ts[ts.length - 1];
 }
 
 function frame(now) {
@@ -607,11 +678,19 @@ function render() {
   const { ctx, w, h } = canvasSize(canvas, state.view.h);
   ctx.clearRect(0, 0, w, h);
   drawGrid(ctx);
+  // obstacles inside the map frame only: beyond the bounds the car cannot go anyway (a
+  // TPCAP case's obstacles reach past its map)
+  const [bx0, by0, bx1, by1] = state.scene.bounds;
+  ctx.save();
+  ctx.beginPath();
+  ctx.rect(sx(bx0), sy(by1), sx(bx1) - sx(bx0), sy(by0) - sy(by1));
+  ctx.clip();
   for (const ob of state.scene.obstacles) {
     polyPath(ctx, ob.vertices);
     ctx.fillStyle = OBSTACLE_FILL[ob.kind] || "#bdc3c7";
     ctx.fill();
   }
+  ctx.restore();
   const planned = state.health.planned_colour;
   const [gx, gy, gh] = state.scene.goal;
   drawCar(ctx, gx, gy, gh, "#4a5a6a", { dash: [4, 4], width: 1.5 });
@@ -675,7 +754,83 @@ function render() {
       fill: true, wheels: true, steer: pose.steer, width: 2,
     });
   }
+  for (const run of state.runs) {
+    if (run.outcome.reason === "collision") drawCollision(ctx, run);
+  }
   drawLegend(ctx, w);
+}
+
+// Where a run hit: the car outline at its last pose (the first pose in contact) in red,
+// and a ring with a cross on the contact (the mean of the outline/obstacle crossings).
+function drawCollision(ctx, run) {
+  const s = run.series;
+  const n = s.t.length - 1;
+  const car = carCorners(s.x[n], s.y[n], s.heading[n]);
+  const [cx, cy] = contactPoint(car, state.scene.obstacles) || [s.x[n], s.y[n]];
+  ctx.save();
+  ctx.strokeStyle = COLLISION_COLOUR;
+  ctx.lineWidth = 2;
+  polyPath(ctx, car);
+  ctx.stroke();
+  const X = sx(cx);
+  const Y = sy(cy);
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  ctx.arc(X, Y, 9, 0, 2 * Math.PI);
+  ctx.moveTo(X - 6, Y - 6);
+  ctx.lineTo(X + 6, Y + 6);
+  ctx.moveTo(X + 6, Y - 6);
+  ctx.lineTo(X - 6, Y + 6);
+  ctx.stroke();
+  ctx.fillStyle = COLLISION_COLOUR;
+  ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.strokeStyle = "#fff";
+  ctx.lineWidth = 3;
+  ctx.strokeText(`${run.plant}: collision`, X + 12, Y - 10); // a halo over the car fill
+  ctx.fillText(`${run.plant}: collision`, X + 12, Y - 10);
+  ctx.restore();
+  run.contact = [cx, cy];
+}
+
+function segmentCrossing(p, p2, q, q2) {
+  const rx = p2[0] - p[0];
+  const ry = p2[1] - p[1];
+  const qx = q2[0] - q[0];
+  const qy = q2[1] - q[1];
+  const den = rx * qy - ry * qx;
+  if (Math.abs(den) < 1e-12) return null;
+  const t = ((q[0] - p[0]) * qy - (q[1] - p[1]) * qx) / den;
+  const u = ((q[0] - p[0]) * ry - (q[1] - p[1]) * rx) / den;
+  return t >= 0 && t <= 1 && u >= 0 && u <= 1 ? [p[0] + t * rx, p[1] + t * ry] : null;
+}
+
+function insidePolygon([x, y], poly) {
+  let inside = false;
+  for (let i = 0, j = poly.length - 1; i < poly.length; j = i++) {
+    const [xi, yi] = poly[i];
+    const [xj, yj] = poly[j];
+    if ((yi > y) !== (yj > y) && x < ((xj - xi) * (y - yi)) / (yj - yi) + xi) inside = !inside;
+  }
+  return inside;
+}
+
+// The middle of the overlap of a car outline with the obstacles: the mean of the edge
+// crossings and of the corners inside the other polygon (null when they do not touch).
+function contactPoint(car, obstacles) {
+  const pts = [];
+  for (const ob of obstacles) {
+    const v = ob.vertices;
+    for (let i = 0; i < car.length; i++) {
+      for (let j = 0; j < v.length; j++) {
+        const hit = segmentCrossing(car[i], car[(i + 1) % car.length], v[j], v[(j + 1) % v.length]);
+        if (hit) pts.push(hit);
+      }
+    }
+    for (const c of car) if (insidePolygon(c, v)) pts.push(c);
+    for (const q of v) if (insidePolygon(q, car)) pts.push(q);
+  }
+  if (!pts.length) return null;
+  return [pts.reduce((a, p) => a + p[0], 0) / pts.length, pts.reduce((a, p) => a + p[1], 0) / pts.length];
 }
 
 function strokeSeries(ctx, s, i0, i1, tail) {
@@ -964,6 +1119,7 @@ function openSceneFile(file) {
   const reader = new FileReader();
   reader.onload = async () => {
     let scene;
+    let notes = [];
     if (/\.(csv|xml)$/i.test(file.name)) {
       // a TPCAP case or a CommonRoad scenario: the server turns it into scene JSON
       let doc;
@@ -974,6 +1130,7 @@ function openSceneFile(file) {
         return;
       }
       scene = doc.scene;
+      notes = doc.notes;
     } else {
       try {
         scene = JSON.parse(reader.result);
@@ -988,16 +1145,52 @@ function openSceneFile(file) {
       showError(`${file.name}: a scene needs bounds, obstacles, start and goal`);
       return;
     }
-    setScene(scene, true);
-    const sel = $("cell");
-    const opt = document.createElement("option");
-    opt.value = "custom";
-    opt.textContent = `custom · ${file.name}`;
-    sel.append(opt);
-    sel.value = "custom";
-    await plan();
+    state.fileScene = { scene, name: file.name, notes };
+    await showFileScene();
   };
   reader.readAsText(file);
+}
+
+// The scene file opened last: the grid selector and the cell selector name it, its import
+// notes are listed, and it is planned.
+async function showFileScene() {
+  const f = state.fileScene;
+  setScene(f.scene, true);
+  showNotes(f.name, f.notes);
+  const grid = $("grid");
+  let gopt = grid.querySelector("option[value='file']");
+  if (!gopt) {
+    gopt = document.createElement("option");
+    gopt.value = "file";
+    grid.append(gopt);
+  }
+  gopt.textContent = `Scene file: ${f.name}`;
+  grid.value = "file";
+  const sel = $("cell");
+  for (const o of [...sel.options]) if (o.value === "custom") o.remove();
+  const opt = document.createElement("option");
+  opt.value = "custom";
+  opt.textContent = `custom · ${f.name}`;
+  sel.append(opt);
+  sel.value = "custom";
+  await plan();
+}
+
+// What loading a file normalised (the import's notes), under the scene selectors.
+function showNotes(name, notes) {
+  const box = $("scene-notes");
+  box.textContent = "";
+  box.hidden = !notes.length;
+  if (!notes.length) return;
+  const head = document.createElement("div");
+  head.textContent = `${name}: loading normalised`;
+  const ul = document.createElement("ul");
+  for (const n of notes) {
+    const li = document.createElement("li");
+    li.textContent = n.startsWith(`${name}: `) ? n.slice(name.length + 2) : n;
+    ul.append(li);
+  }
+  box.append(head, ul);
 }
 
 function saveScene() {
@@ -1019,6 +1212,10 @@ function wire() {
     // keep the base cell: robust index = 36 · variant + cell, so cell i <-> variant 0 of i.
     // Custom or not is read from the selector: state.custom stays true until a cell picked
     // a moment ago has loaded, and reading it here reset that cell to 0.
+    if (ev.target.value === "file") {
+      if (state.fileScene) await showFileScene();
+      return;
+    }
     state.grid = ev.target.value;
     const custom = $("cell").value === "custom";
     state.index = custom ? 0 : state.index % state.health.grids["36"];
@@ -1032,6 +1229,7 @@ function wire() {
   $("cell").addEventListener("change", (ev) => {
     if (ev.target.value === "custom") return;
     for (const o of [...ev.target.options]) if (o.value === "custom") o.remove();
+    $("grid").value = state.grid;
     state.index = Number(ev.target.value);
     loadCell();
   });
@@ -1051,6 +1249,7 @@ function wire() {
   $("plan-btn").addEventListener("click", () => { clearRuns(); plan(); });
   $("run-btn").addEventListener("click", runSelected);
   $("play").addEventListener("click", togglePlay);
+  $("cancel").addEventListener("click", cancelRequest);
   $("speed").addEventListener("change", (ev) => { state.speed = Number(ev.target.value); });
   $("smooth").addEventListener("change", (ev) => {
     state.smooth = ev.target.checked;
