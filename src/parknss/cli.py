@@ -12,7 +12,7 @@ import sys
 
 import typer
 
-from parknss.errors import ParknssError
+from parknss.errors import ParknssError, show_warnings_as_lines
 
 app = typer.Typer(
     name="parknss",
@@ -38,6 +38,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "results",
     "export",
 )
+
+show_warnings_as_lines()  # tolerated-input warnings: one line each, no source path
 
 for _name in COMMAND_MODULES:
     importlib.import_module(f"parknss.commands.{_name}").register(app)
