@@ -62,6 +62,9 @@ class LogRead:
         table: a table log (one shared time column): may be taken row for row.
         meta: the file's parknss_trial metadata, if any.
         provenance: the reader's own provenance entries (DBC, buses, ...).
+        unit_required: a source without a unit of its own (a DBC signal with an empty
+            unit) needs the mapping's ``unit`` (refused otherwise, rather than taken to
+            be the schema unit).
     """
 
     series: list[Series]
@@ -70,6 +73,7 @@ class LogRead:
     table: bool = False
     meta: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
+    unit_required: bool = False
 
 
 @dataclass(frozen=True)
@@ -418,7 +422,13 @@ def _no_span(prepared, source: str, window, log_start: float) -> None:
 # ------------------------------------------------------------------ 5: values
 
 
-def _file_unit(series: list[Series], spec: ChannelSource, use_file_units: bool, source: str):
+def _file_unit(
+    series: list[Series],
+    spec: ChannelSource,
+    use_file_units: bool,
+    source: str,
+    unit_required: bool = False,
+):
     """The unit to convert from: the mapping's, else the sources' own, else None."""
     if spec.unit is not None:
         return spec.unit
@@ -433,6 +443,11 @@ def _file_unit(series: list[Series], spec: ChannelSource, use_file_units: bool, 
             f"({', '.join(sorted(units))}); set the channel's unit in the mapping"
         )
     unit = units.pop()
+    if not unit and unit_required and ch.unit != "-":
+        raise DataError(
+            f"{source}: {series[0].label}: the DBC gives the signal no unit; state it in "
+            f"the mapping (channels.{channel}.unit, e.g. {ch.unit!r} if it is in {ch.unit})"
+        )
     if not unit:
         return None
     if canonical_unit(unit) is None:
@@ -457,6 +472,7 @@ def channel_values(
     use_file_units: bool,
     source: str,
     clipped: dict,
+    unit_required: bool = False,
 ) -> np.ndarray:
     """Step 5 for one schema channel on the grid: combine, scale, unit, sign, clip."""
     if spec.combine == "sum":
@@ -464,7 +480,7 @@ def channel_values(
     else:
         v = np.mean(parts, axis=0) if len(parts) > 1 else np.asarray(parts[0], dtype=np.float64)
     v = v * spec.scale + spec.offset
-    unit = _file_unit(series, spec, use_file_units, source)
+    unit = _file_unit(series, spec, use_file_units, source, unit_required)
     if unit is not None:
         v = convert_to_schema(v, unit, name)
     if spec.invert:
@@ -512,7 +528,8 @@ def to_channels(
             continue  # not in the log: the reader or validation names it
         parts = [values[s.key] for s in series]
         out[name] = channel_values(
-            name, spec, parts, series, out.get("gear"), read.use_file_units, source, clipped
+            name, spec, parts, series, out.get("gear"), read.use_file_units, source, clipped,
+            read.unit_required,
         )
     for name, series in by_channel.items():
         if name.startswith(TRUTH_PREFIX):

@@ -68,7 +68,7 @@ LOG_SUFFIXES: tuple[str, ...] = (
 )
 LOG_KINDS = (
     ".csv (table or SavvyCAN GVRET), .parquet, .mat, .mf4/.mdf (MDF4, decoded or bus logging) "
-    "or .blf/.asc/.log (CAN)"
+    "or .blf/.asc/.trc/.log (CAN)"
 )
 _NAME_RE = re.compile(r"^(?P<cls>[A-Za-z][A-Za-z0-9_]*?)_r(?P<rep>[0-9]+)$")
 _SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -406,7 +406,8 @@ def _read_can(path: Path, m: ChannelMapping) -> LogRead:
     m = resolve_dbc(m, path)
     series, prov = read_can_series(path, requests, m.can)
     fmt = prov.pop("format", path.suffix.lower().lstrip("."))
-    return LogRead(series, fmt, use_file_units=m.can.use_file_units, provenance=prov)
+    return LogRead(series, fmt, use_file_units=m.can.use_file_units, provenance=prov,
+                   unit_required=m.can.use_file_units)
 
 
 def _is_can(path: Path) -> bool:
@@ -844,6 +845,38 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _list_logs(folder: Path) -> tuple[list[Path], list[dict[str, str]]]:
+    """The logs of a folder (sorted), and every other entry with why it is skipped
+    (hidden files are skipped without a word, and so is the manifest)."""
+    logs, skipped = [], []
+    for f in sorted(folder.iterdir()):
+        if f.name.startswith(".") or f.name == MANIFEST:
+            continue
+        why = None
+        if f.is_symlink() and not f.exists():
+            why = "dangling symbolic link"
+        elif f.is_dir():
+            why = "a folder (sub-folders are not read)"
+        elif not f.is_file():
+            why = "not a regular file"
+        elif f.suffix.lower() not in LOG_SUFFIXES:
+            why = f"{f.suffix or 'no suffix'}: not a log type parknss reads"
+        if why is None:
+            logs.append(f)
+        else:
+            skipped.append({"file": f.name, "why": why})
+    return logs, skipped
+
+
+def skipped_summary(campaign: Campaign) -> str | None:
+    """'skipped N files: a (why), b (why)' from an imported campaign's meta, or None."""
+    skipped = campaign.meta.get("skipped_files") or []
+    if not skipped:
+        return None
+    items = ", ".join(f"{s['file']} ({s['why']})" for s in skipped)
+    return f"skipped {len(skipped)} file{'s' * (len(skipped) > 1)}: {items}"
+
+
 def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None = None) -> Campaign:
     """A validated Campaign from a folder of logs, one file per trial.
 
@@ -857,14 +890,7 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
             f"{folder}: log folder not found" if not folder.exists() else f"{folder}: not a folder"
         )
     m = as_mapping(mapping)
-    logs = sorted(
-        f
-        for f in folder.iterdir()
-        if f.is_file()
-        and f.suffix.lower() in LOG_SUFFIXES
-        and f.name != MANIFEST
-        and not f.name.startswith(".")
-    )
+    logs, skipped = _list_logs(folder)
     if (folder / MANIFEST).exists():
         jobs = _read_manifest(folder, logs)
     else:
@@ -908,6 +934,8 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
         meta["absent_channels"] = m.absent()
     if unlabelled:
         meta["unlabelled_trials"] = unlabelled
+    if skipped:
+        meta["skipped_files"] = skipped
     if m.vehicle.geometry is not None:
         meta["vehicle_geometry"] = VehicleGeometry.from_dict(m.vehicle.geometry).to_dict()
     return Campaign(trials, name=folder.name, meta=meta)
@@ -920,6 +948,7 @@ __all__ = [
     "read_campaign",
     "read_trial",
     "read_trials",
+    "skipped_summary",
     "write_campaign",
     "write_trial",
     "write_trial_csv",
