@@ -142,6 +142,12 @@ class ChannelSource(StrictModel):
             return {"absent": True}
         return v
 
+    @property
+    def has_source(self) -> bool:
+        """Whether the spec names where the channel comes from (or that it has none)."""
+        return (any(x is not None for x in (self.column, self.message, self.signal,
+                                            self.sources, self.constant)) or self.absent)
+
     @field_validator("values", mode="before")
     @classmethod
     def _keys_as_text(cls, v):
@@ -160,7 +166,7 @@ class ChannelSource(StrictModel):
             )
             if on
         ]
-        if len(kinds) != 1:
+        if len(kinds) > 1 or (not kinds and self.has_source):
             raise ValueError(
                 "give one of: 'column', 'message' and 'signal', 'sources', 'absent: true' or "
                 "'constant'" + (f" (got {' and '.join(kinds)})" if kinds else "")
@@ -224,10 +230,12 @@ class TimeSource(StrictModel):
 
 
 class CsvOptions(StrictModel):
-    """How CSV logs are written: field delimiter and decimal mark."""
+    """How CSV logs are written: field delimiter and decimal mark (sniffed from the file
+    when not given), and whether a units row follows the header (None: detected)."""
 
     delimiter: str = Field(",", min_length=1, max_length=1)
     decimal: str = Field(".", min_length=1, max_length=1)
+    units_row: bool | None = None
 
 
 class VehicleInfo(StrictModel):
@@ -335,6 +343,8 @@ class ChannelMapping(StrictModel):
         src = self.channels.get(name)
         if src is None:
             src = ChannelSource(column=name)
+        elif not src.has_source:  # only how to read it: from a column of its own name
+            src = src.model_copy(update={"column": name})
         if name == "gear" and self.gear_values is not None and src.values is None:
             src = src.model_copy(update={"values": {k: float(v) for k, v in
                                                    self.gear_values.items()}})
@@ -359,6 +369,7 @@ class Column:
 
     values: np.ndarray
     locate: Callable[[int], str]
+    unit: str = ""  # the file's own unit for it (CSV bracket or units row), if any
 
 
 def _check_unit(where: str, name: str, unit: str | None) -> None:
