@@ -244,6 +244,8 @@ def _check_finite(s: Series, values: np.ndarray, source: str) -> None:
 def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None, **changes) -> Series:
     """The samples ``keep`` of a series (``values``: already taken from them), with other
     fields changed; error locations still point into the source."""
+    if keep.all():  # nothing dropped: share the arrays (a long log is not copied)
+        return replace(s, values=s.values if values is None else values, **changes)
     idx = np.flatnonzero(keep)
     locate = s.locate
     return replace(
@@ -479,7 +481,8 @@ def channel_values(
         v = np.sum(parts, axis=0)
     else:
         v = np.mean(parts, axis=0) if len(parts) > 1 else np.asarray(parts[0], dtype=np.float64)
-    v = v * spec.scale + spec.offset
+    if spec.scale != 1.0 or spec.offset != 0.0:
+        v = v * spec.scale + spec.offset
     unit = _file_unit(series, spec, use_file_units, source, unit_required)
     if unit is not None:
         v = convert_to_schema(v, unit, name)

@@ -223,14 +223,17 @@ def _read_columns(path: Path, names: list[str], trailing: bool, data_start: int,
             column_types={n: pa.string() for n in names} if as_text else None,
         )
 
+    pool = pa.system_memory_pool()  # freed blocks go back to the system
+    n_max = _count_lines(path)  # rows <= lines: the columns are filled in place
     for as_text in (False, True):
-        chunks: dict[str, list] = {n: [] for n in names}
+        cols = {n: _Filler(n_max) for n in names}
         try:
             with pc.open_csv(path, read_options=read, parse_options=parse,
-                             convert_options=convert(as_text)) as reader:
+                             convert_options=convert(as_text), memory_pool=pool) as reader:
                 for batch in reader:
                     for n, col in zip(batch.schema.names, batch.columns, strict=True):
-                        chunks[n].append(col)
+                        cols[n].add(col)
+                    del batch
         except pa.ArrowInvalid as exc:
             if "conversion error" in str(exc) and not as_text:
                 continue  # text appeared in a numeric column after the first block
@@ -239,17 +242,48 @@ def _read_columns(path: Path, names: list[str], trailing: bool, data_start: int,
             raise DataError(f"{path}: not a readable CSV file ({one_line(exc)})") from exc
         break
     locate = _locator(data_start)
-    out = {}
-    for n in names:
-        arr = pa.chunked_array(chunks[n]) if chunks[n] else pa.array([], pa.float64())
-        if pa.types.is_floating(arr.type) or pa.types.is_integer(arr.type):
-            values = arr.to_numpy().astype(np.float64, copy=False)
-        else:
-            values = np.asarray(arr.cast(pa.string()).to_pylist(), dtype=object)
-        out[n] = Column(values, locate)
+    out = {n: Column(cols[n].values(), locate) for n in names}
     if not len(next(iter(out.values())).values):
         raise DataError(f"{path}: no data rows below the header")
     return out
+
+
+def _count_lines(path: Path, chunk: int = 1 << 24) -> int:
+    """Newlines in the file (+1): an upper bound on its rows, read in binary chunks."""
+    n = 1
+    with open(path, "rb") as f:
+        while piece := f.read(chunk):
+            n += piece.count(b"\n")
+    return n
+
+
+class _Filler:
+    """One column filled block by block: float64 into one preallocated array while every
+    block is numeric; text (str objects) once a block is not."""
+
+    def __init__(self, capacity: int) -> None:
+        self.num: np.ndarray | None = np.empty(capacity, dtype=np.float64)
+        self.n = 0
+        self.text: list[np.ndarray] = []
+
+    def add(self, col) -> None:
+        import pyarrow as pa
+
+        if self.num is not None and (pa.types.is_floating(col.type)
+                                     or pa.types.is_integer(col.type)):
+            k = len(col)
+            self.num[self.n:self.n + k] = col.to_numpy(zero_copy_only=False)
+            self.n += k
+            return
+        if self.num is not None:  # switch to text: what was numbers becomes their text
+            self.text = [self.num[: self.n].astype(object)]
+            self.num = None
+        self.text.append(np.asarray(col.cast(pa.string()).to_pylist(), dtype=object))
+
+    def values(self) -> np.ndarray:
+        if self.num is not None:
+            return self.num[: self.n]
+        return np.concatenate(self.text) if self.text else np.zeros(0)
 
 
 def _diagnose(path: Path, n_fields: int, data_start: int, delimiter: str, exc) -> None:

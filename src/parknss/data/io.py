@@ -132,7 +132,7 @@ def parse_numbers(
     """
     v = col.values
     if v.dtype.kind in "biuf":
-        return v.astype(np.float64)
+        return v.astype(np.float64, copy=False)
     text = [str(x).strip() for x in v]
     if decimal != ".":
         text = [x.replace(decimal, ".") for x in text]
