@@ -322,3 +322,17 @@ def test_can_sources_in_the_mapping_are_checked(tmp_path):
     csv = write_trial(read_campaign("campaigns/default")[0], tmp_path / "park_in_left_r1.csv")
     with pytest.raises(DataError, match=r"channel 'gear': the mapping gives a CAN message 'GEAR'"):
         read_trial(csv, EXAMPLE)  # a CAN mapping on a CSV log
+
+
+def test_a_validity_signal_gates_a_channel(tmp_path):
+    src = tmp_path / "logs"
+    mapping = setup_logs(src, ".blf")
+    doc = yaml.safe_load(mapping.read_text())
+    doc["channels"]["vx"]["valid_if"] = {"message": "GEAR", "signal": "GearPos",
+                                         "equals": ["R", "D"]}
+    mapping.write_text(yaml.safe_dump(doc))
+    trial = read_trial(src / "park_in_left_r1.blf", mapping)
+    # valid from the change to R (1.234 s) to the change to N (4.005 s); the gear
+    # channel itself is not gated
+    assert trial["t"][0] == pytest.approx(1.24) and trial["t"][-1] == pytest.approx(4.0)
+    assert json.loads(trial.provenance)["masked_samples"]

@@ -166,3 +166,24 @@ def test_stray_quote_and_unreadable_file_are_one_line(tmp_path, capsys):
             read_trial(p)
     finally:
         p.chmod(0o644)
+
+
+def test_a_validity_column_gates_a_channel(tmp_path):
+    ch = _channels()
+    names = [*REQUIRED_CHANNELS, "SpeedValid"]
+    ch["SpeedValid"] = np.ones(N)
+    ch["SpeedValid"][:50] = 0  # the first 0.5 s invalid: the trial starts at 0.5 s
+    ch["SpeedValid"][150:160] = 0  # a 0.1 s hole: bridged by the resampler
+    ch["vx"][150:160] = 99.0  # what the invalid samples carry
+    p = _write(tmp_path / "log.csv", names, _rows(ch, names))
+    m = tmp_path / _mapping(tmp_path, "channels:\n  vx: {column: vx, valid_if: "
+                                      "{column: SpeedValid, equals: [1]}}\n")
+    trial = read_trial(p, m)
+    assert trial["t"][0] == pytest.approx(0.5) and trial.n == N - 50
+    assert trial["vx"].max() < 2.0  # the 99s are masked and bridged
+    prov = json.loads(trial.provenance)
+    assert prov["masked_samples"] == {"channel 'vx'": 60}
+    bad = tmp_path / _mapping(tmp_path, "channels:\n  vx: {column: vx, valid_if: "
+                                        "{column: Nope}}\n")
+    with pytest.raises(DataError, match=r"channel 'vx': valid_if column 'Nope' not found"):
+        read_trial(p, bad)

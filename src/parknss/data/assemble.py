@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from parknss.data.mapping import ChannelMapping, ChannelSource
+from parknss.data.mapping import GATE_SUFFIX, ChannelMapping, ChannelSource, ValidIf
 from parknss.data.resample import Series, check_series, grid_between, hold, linear
 from parknss.errors import DataError
 from parknss.signals import (
@@ -257,10 +257,39 @@ def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None, **cha
     )
 
 
-def prepare(s: Series, m: ChannelMapping, source: str) -> _Prepared:
-    """Steps 1-2 for one series: drop invalid samples, map enumerations, check numbers."""
+def _gate_ok(gate: Series, rule: ValidIf) -> np.ndarray:
+    """Per gate sample: is its value one of ``rule.equals`` (numbers or text)."""
+    v = gate.values
+    nums = [x for x in (_as_number(e) for e in rule.equals) if x is not None]
+    texts = {str(e).strip() for e in rule.equals if isinstance(e, str)}
+    if v.dtype.kind in "OSU":
+        out = np.array([str(e).strip() in texts for e in v], dtype=bool)
+        for x in nums:
+            out |= np.array([_text_equals_number(e, x) for e in v], dtype=bool)
+        return out
+    out = np.zeros(len(v), dtype=bool)
+    for x in nums:
+        out |= _equal(v, x)
+    return out
+
+
+def gated(s: Series, gate: Series, rule: ValidIf, tol: float) -> np.ndarray:
+    """Samples of ``s`` the gate marks invalid: its last value at or before each sample
+    time (± tol) is not valid, or there is none yet. Bool (N,)."""
+    ok = _gate_ok(gate, rule)
+    idx = np.searchsorted(gate.t, s.t + tol, side="right") - 1
+    return (idx < 0) | ~ok[np.clip(idx, 0, None)]
+
+
+def prepare(
+    s: Series, m: ChannelMapping, source: str, extra_bad: np.ndarray | None = None
+) -> _Prepared:
+    """Steps 1-2 for one series: drop invalid samples (``extra_bad``: those its validity
+    signal marks), map enumerations, check numbers."""
     spec = spec_of(m, s.channel)
     bad = _invalid_mask(s, spec)
+    if extra_bad is not None:
+        bad |= extra_bad
     values = _map_values(_subset(s, ~bad), spec, source)
     if spec.valid_range is not None and s.values.dtype.kind in "OSU":
         lo, hi = spec.valid_range
@@ -588,7 +617,21 @@ def assemble(
         raise DataError(f"{source}: no channels to read (check the mapping)")
     for s in read.series:
         check_series(s, source)
-    prepared = [prepare(s, m, source) for s in read.series]
+    gates = {s.channel[: -len(GATE_SUFFIX)]: s for s in read.series
+             if s.channel.endswith(GATE_SUFFIX)}
+    series = [s for s in read.series if not s.channel.endswith(GATE_SUFFIX)]
+    read = replace(read, series=series)
+    prepared = []
+    tol = m.resample.time_tolerance_s
+    for s in series:
+        rule = m.source(s.channel).valid_if if s.channel in CHANNEL_BY_NAME else None
+        extra = None
+        if rule is not None:
+            if s.channel not in gates:
+                raise DataError(f"{source}: {s.label}: valid_if is read from CSV, Parquet, "
+                                ".mat and CAN logs only")
+            extra = gated(s, gates[s.channel], rule, tol)
+        prepared.append(prepare(s, m, source, extra))
     masked = {p.s.label: p.n_masked for p in prepared if p.n_masked}
     base = {"source_file": source, "format": read.fmt, **read.provenance}
     rate = _rate_hz(read)
@@ -603,7 +646,6 @@ def assemble(
             prov["clipped_samples"] = clipped
         return [Assembled(channels, prov)]
     parts, info = stretches(prepared, m, source, window)
-    tol = m.resample.time_tolerance_s
     out = []
     for k, st in enumerate(parts):
         g = grid_between(st.start, st.end, tol)

@@ -32,10 +32,12 @@ from parknss.data.assemble import Assembled, LogRead, assemble
 from parknss.data.canlog import CAN_SUFFIXES
 from parknss.data.csvlog import read_csv_table
 from parknss.data.mapping import (
+    GATE_SUFFIX,
     ChannelMapping,
     Column,
     CsvOptions,
     as_mapping,
+    iter_gates,
     iter_sources,
     mapping_hint,
     resolve_dbc,
@@ -281,6 +283,17 @@ def table_read(raw: dict[str, Column], meta: dict, m: ChannelMapping, path: Path
             Series(name, source_key(name, k), label, t, values, hold, col.unit or None,
                    col.locate)
         )
+    for name, gate in iter_gates(m):
+        cname = None if gate.column is None else find_column(raw, gate.column)
+        if cname is None:
+            raise DataError(
+                f"{source}: channel {name!r}: valid_if {gate.describe()} not found "
+                f"(columns: {', '.join(raw)})"
+            )
+        col = raw[cname]
+        series.append(Series(name + GATE_SUFFIX, name + GATE_SUFFIX,
+                             f"channel {name!r} (valid_if column {cname!r})", t, col.values,
+                             True, None, col.locate))
     for name, col in raw.items():
         if name.startswith(TRUTH_PREFIX):
             values = parse_numbers(col, f"channel {name!r}", source, m.csv.decimal)
@@ -435,6 +448,13 @@ def _read_can(path: Path, m: ChannelMapping) -> LogRead:
             CanRequest(source_key(name, k), name, ref.message, str(ref.signal),
                        source_label(name, ref))
         )
+    for name, gate in iter_gates(m):
+        if gate.message is None:
+            raise DataError(f"{path}: channel {name!r}: valid_if needs 'message' and "
+                            "'signal' in a CAN log")
+        requests.append(CanRequest(name + GATE_SUFFIX, name + GATE_SUFFIX, gate.message,
+                                   str(gate.signal), f"channel {name!r} (valid_if message "
+                                   f"{gate.message!r}, signal {gate.signal!r})"))
     if m.can.dbc is None:
         raise DataError(f"{path}: a CAN log needs a DBC: set can.dbc in the mapping")
     m = resolve_dbc(m, path)

@@ -82,6 +82,15 @@ class SourceRef(StrictModel):
         return f"message {self.message!r}, signal {self.signal!r}"
 
 
+class ValidIf(SourceRef):
+    """A validity signal that gates a channel: a sample of the channel counts only where
+    the gate's last value at or before its time is one of ``equals`` (numbers, or labels
+    of a value table / text). Read from the same kind of source as the channel (a column,
+    or a CAN message and signal), e.g. CANedge ``SpeedValid``, ``ImuValid``."""
+
+    equals: list[float | str] = Field(default_factory=lambda: [1.0], min_length=1)
+
+
 class ChannelSource(StrictModel):
     """Where one schema channel comes from and how its values become schema values.
 
@@ -107,6 +116,8 @@ class ChannelSource(StrictModel):
             integer, enumerated/text and CAN signals; linear otherwise).
         max_gap_s: longest hole between two samples of this channel that is bridged, s
             (None: ``resample.max_gap_s``).
+        valid_if: a validity signal gating the channel (:class:`ValidIf`): samples where
+            it is not valid are invalid samples (``on_invalid`` applies).
         event: the channel is logged on change only (its value holds until the next
             sample, however long): no gap limit, and its last value holds to the end.
             None: the reader's default (true for MDF enumerated and integer channels,
@@ -134,6 +145,7 @@ class ChannelSource(StrictModel):
     interpolation: Interpolation = "auto"
     max_gap_s: float | None = Field(None, gt=0.0)
     event: bool | None = None
+    valid_if: ValidIf | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -499,6 +511,18 @@ def iter_sources(m: ChannelMapping) -> Iterator[tuple[str, int, SourceRef, Chann
         src = m.source(name)
         for k, ref in enumerate(src.refs):
             yield name, k, ref, src
+
+
+GATE_SUFFIX = "#valid"  # the series of a channel's valid_if signal: '<channel>#valid'
+
+
+def iter_gates(m: ChannelMapping) -> Iterator[tuple[str, ValidIf]]:
+    """(schema channel, its validity signal) of every gated channel."""
+    for name in CHANNEL_BY_NAME:
+        if name != "t":
+            src = m.source(name)
+            if src.valid_if is not None and not src.absent and src.constant is None:
+                yield name, src.valid_if
 
 
 def source_key(channel: str, k: int) -> str:
