@@ -24,6 +24,7 @@ from helpers.candrive import (
     write_log,
 )
 from parknss.cli import main
+from parknss.data.describe import describe_campaign
 from parknss.data.io import import_folder, read_campaign, read_trial, write_trial
 from parknss.data.mapping import load_mapping, resolve_dbc
 from parknss.errors import ConfigError, DataError, ParknssError
@@ -156,6 +157,11 @@ def test_a_short_frame_is_masked_and_counted(tmp_path):
     prov = json.loads(tr.provenance)
     assert prov["short_frames"] == {"steer_cmd#0": 1}
     assert tr.n == 575  # the other frames of the message still carry the signal
+    camp = import_folder(tmp_path / "logs", mapping)  # describe names them
+    summary = describe_campaign(camp)
+    assert summary.short_frames == {"park_in_left_r1": {"steer_cmd#0": 1}}
+    assert ("frames shorter than the DBC length (masked): park_in_left_r1: steer_cmd#0 1"
+            in summary.table())
 
 
 # ------------------------------------------------------------------- malformed logs
