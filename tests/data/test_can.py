@@ -342,3 +342,20 @@ def test_a_validity_signal_gates_a_channel(tmp_path):
     # channel itself is not gated
     assert trial["t"][0] == pytest.approx(1.24) and trial["t"][-1] == pytest.approx(4.0)
     assert json.loads(trial.provenance)["masked_samples"]
+
+
+def test_a_dbc_signal_without_a_unit_needs_the_mappings_unit(tmp_path, capsys):
+    src = tmp_path / "logs"
+    mapping = setup_logs(src, ".blf")
+    db = vehicle_dbc()
+    db.get_message_by_name("BRK").get_signal_by_name("BrkPrs").unit = None
+    (tmp_path / "vehicle.dbc").write_text(db.as_dbc_string())
+    with pytest.raises(DataError, match=r"channel 'brake_pressure' \(message 'BRK', signal "
+                                        r"'BrkPrs'\): the DBC gives the signal no unit; state "
+                                        r"it in the mapping \(channels.brake_pressure.unit"):
+        read_trial(src / "park_in_left_r1.blf", mapping)
+    doc = yaml.safe_load(mapping.read_text())
+    doc["channels"]["brake_pressure"]["unit"] = "MPa"
+    mapping.write_text(yaml.safe_dump(doc))
+    trial = read_trial(src / "park_in_left_r1.blf", mapping)
+    assert 10.0 < trial["brake_pressure"].max() < 11.5  # t + 5 bar, converted from MPa

@@ -5,7 +5,6 @@ guessed from the step (or refused with the fix), and hostile files refused in on
 from __future__ import annotations
 
 import json
-import os
 import warnings
 from pathlib import Path
 
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 
 from parknss.cli import main
+from parknss.data import csvlog
 from parknss.data.io import read_trial
 from parknss.errors import DataError, ParknssWarning
 from parknss.signals import KMH_PER_MS, REQUIRED_CHANNELS
@@ -158,32 +158,20 @@ def test_stray_quote_and_unreadable_file_are_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "line 151: unbalanced quote" in err
     p.write_text("\n".join(lines[:150] + lines[151:]) + "\n")
-    if os.geteuid() == 0:
-        pytest.skip("root reads any file")
-    p.chmod(0)
-    try:
-        with pytest.raises(DataError, match="cannot read the file \\(permission denied\\)"):
-            read_trial(p)
-    finally:
-        p.chmod(0o644)
 
 
-def test_a_validity_column_gates_a_channel(tmp_path):
+def test_an_unreadable_file_is_one_line(tmp_path, monkeypatch, capsys):
     ch = _channels()
-    names = [*REQUIRED_CHANNELS, "SpeedValid"]
-    ch["SpeedValid"] = np.ones(N)
-    ch["SpeedValid"][:50] = 0  # the first 0.5 s invalid: the trial starts at 0.5 s
-    ch["SpeedValid"][150:160] = 0  # a 0.1 s hole: bridged by the resampler
-    ch["vx"][150:160] = 99.0  # what the invalid samples carry
-    p = _write(tmp_path / "log.csv", names, _rows(ch, names))
-    m = tmp_path / _mapping(tmp_path, "channels:\n  vx: {column: vx, valid_if: "
-                                      "{column: SpeedValid, equals: [1]}}\n")
-    trial = read_trial(p, m)
-    assert trial["t"][0] == pytest.approx(0.5) and trial.n == N - 50
-    assert trial["vx"].max() < 2.0  # the 99s are masked and bridged
-    prov = json.loads(trial.provenance)
-    assert prov["masked_samples"] == {"channel 'vx'": 60}
-    bad = tmp_path / _mapping(tmp_path, "channels:\n  vx: {column: vx, valid_if: "
-                                        "{column: Nope}}\n")
-    with pytest.raises(DataError, match=r"channel 'vx': valid_if column 'Nope' not found"):
-        read_trial(p, bad)
+    p = _write(tmp_path / "park_in_left_r1.csv", REQUIRED_CHANNELS,
+               _rows(ch, list(REQUIRED_CHANNELS)))
+
+    def denied(path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(csvlog, "open", denied, raising=False)  # as chmod 000 (even as root)
+    with pytest.raises(DataError, match=r"park_in_left_r1.csv: cannot read the file "
+                                        r"\(permission denied\)"):
+        read_trial(p)
+    assert main(["campaign", "import", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "permission denied" in err
