@@ -121,9 +121,14 @@ def test_imports_are_followed_relative_to_the_dbc_folder(tmp_path):
     assert loaded.message_names() == ["ESP", "BRK"]
     assert loaded.message("ESP").get_signal_by_name("VehSpd").comment == "from the import"
     assert lines == [f"DBC file {car}: line 6: CM_ statement has no closing ';' (added)"]
-    # a fault inside the imported file names that file and its line
+    # a fault inside the imported file names that file and its line; an edit of the
+    # imported file alone is seen (the cache key covers the imports)
     (tmp_path / "sub" / "_common.dbc").write_text(HEAD.split("BO_ 300")[0] +
                                                    'VAL_ 256 Nope 0 "x" ;\n')
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        load_dbc(car)
+    assert any("line 14 of _common.dbc" in str(w.message) for w in caught)
     _, lines = _load(car)
     assert lines[1] == (f"DBC file {car}: line 14 of _common.dbc: VAL_ table for 'Nope' "
                         "unused (message id 256 has no signal 'Nope'; ignored)")

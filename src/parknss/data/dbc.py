@@ -482,8 +482,22 @@ def load_dbc(path: str | Path, strict: bool = False) -> LoadedDbc:
     p = Path(path)
     if not p.is_file():
         raise DataError(f"DBC file {p} not found")
-    st = p.stat()
-    return _load_cached(p, (st.st_size, st.st_mtime_ns), bool(strict))
+    return _load_cached(p, _stamp(p), bool(strict))
+
+
+def _stamp(path: Path, seen: frozenset[Path] = frozenset()) -> tuple:
+    """(size, mtime) of the file and of every file it IMPORTs (the cache key)."""
+    st = path.stat()
+    out: tuple = ((str(path), st.st_size, st.st_mtime_ns),)
+    if path.suffix.lower() not in DBC_SUFFIXES or path.resolve() in seen:
+        return out
+    text = path.read_bytes().decode("cp1252", errors="replace")
+    for line in text.split("\n"):
+        m = _IMPORT.match(line.rstrip("\r"))
+        target = path.parent / m.group(1) if m is not None else None
+        if target is not None and target.is_file():
+            out += _stamp(target, seen | {path.resolve()})
+    return out
 
 
 # ------------------------------------------------------------------------ bit layout
