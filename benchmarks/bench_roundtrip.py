@@ -9,7 +9,8 @@ the format's mapping, through the same `import_folder` users call:
 * ``csv97``: CSV at a 97 Hz clock with 1 % jitter, time in ms (values linearly
   interpolated onto the jittered times, gear held): resampled back onto 100 Hz;
 * ``parquet``, ``mat``, ``mdf4``: parknss's writers (decoded MDF4: one data group);
-* ``blf``, ``asc``, ``candump``, ``gvret``, ``mf4-bus``: CAN frames in the layout of
+* ``blf``, ``asc``, ``trc`` (PCAN 2.1), ``candump``, ``gvret``, ``mf4-bus``: CAN frames in
+  the layout of
   configs/buses/parknss_bus.dbc at 100 Hz (absolute time stamps), imported with
   configs/buses/parknss_bus.yaml; the DBC's resolutions quantise the values.
 
@@ -56,7 +57,8 @@ LAYOUT = {
     "decel_cmd": ("PK_COMMAND", "DecelReq", 1.0),
     "steer_cmd": ("PK_COMMAND", "StrWhlAngReq", 1.0),
 }
-BUS_FORMATS = {"blf": ".blf", "asc": ".asc", "candump": ".log", "gvret": ".csv", "mf4-bus": ".mf4"}
+BUS_FORMATS = {"blf": ".blf", "asc": ".asc", "trc": ".trc", "candump": ".log", "gvret": ".csv",
+               "mf4-bus": ".mf4"}
 
 
 def write_csv97(tr: Trial, path: Path, rng: np.random.Generator) -> None:

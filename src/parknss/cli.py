@@ -23,7 +23,7 @@ from collections.abc import Iterator
 
 import typer
 
-from parknss.errors import ParknssError, one_line
+from parknss.errors import ParknssError, one_line, show_warnings_as_lines
 from parknss.outputs import interrupt_note
 
 app = typer.Typer(
@@ -50,6 +50,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "results",
     "export",
 )
+
+show_warnings_as_lines()  # tolerated-input warnings: one line each, no source path
 
 for _name in COMMAND_MODULES:
     importlib.import_module(f"parknss.commands.{_name}").register(app)

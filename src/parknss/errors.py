@@ -38,6 +38,29 @@ class PlanningError(ParknssError):
     """A scene or planning request is malformed (not: no plan found, which is a result)."""
 
 
+class ParknssWarning(UserWarning):
+    """Something in the input was tolerated; the message is one line (shown by the CLI as
+    ``parknss: warning: ...``, without a source location)."""
+
+
+def show_warnings_as_lines() -> None:
+    """Print ParknssWarning as one line ``parknss: warning: MESSAGE`` on stderr (others
+    as Python prints them); installed by the command line."""
+    import sys
+    import warnings
+
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if isinstance(category, type) and issubclass(category, ParknssWarning):
+            print(f"parknss: warning: {message}", file=file or sys.stderr)
+            return
+        default(message, category, filename, lineno, file, line)
+
+    if getattr(default, "__name__", "") != "show":
+        warnings.showwarning = show
+
+
 def one_line(exc: BaseException, limit: int = 300) -> str:
     """A foreign exception as ``Type: message`` on one line (whitespace collapsed, cut at
     ``limit`` characters), for the parenthesis of a ParknssError's message."""

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -12,134 +11,24 @@ import cantools
 import numpy as np
 import pytest
 import yaml
-from cantools.database.can import Database, Message
-from cantools.database.can import Signal as CanSignal
-from cantools.database.conversion import BaseConversion
 
+from helpers.candrive import (
+    EPOCH,
+    EXAMPLE,
+    GEAR_CHANGES_S,
+    SIGNALS,
+    frame_times,
+    frames,
+    setup_logs,
+    vehicle_dbc,
+    write_log,
+)
 from parknss.cli import main
-from parknss.config import CONFIG_DIR
+from parknss.data.describe import describe_campaign
 from parknss.data.io import import_folder, read_campaign, read_trial, write_trial
 from parknss.data.mapping import load_mapping, resolve_dbc
 from parknss.errors import ConfigError, DataError, ParknssError
-from parknss.signals import DEG_PER_RAD, KMH_PER_MS, REQUIRED_CHANNELS
-
-EXAMPLE = CONFIG_DIR / "mapping_can_example.yaml"
-EPOCH = 1_700_000_000.0  # loggers stamp frames in absolute time
-GEAR_EVENTS = ((0.0, "P"), (1.234, "R"), (3.0, "D"), (4.005, "N"))
-GEAR_CHANGES_S = (1.24, 3.0, 4.01)  # first grid time at/after each change
-
-
-def _sig(name, start, scale, unit="", signed=True, length=16, choices=None) -> CanSignal:
-    conv = BaseConversion.factory(scale=scale, offset=0, choices=choices)
-    return CanSignal(name, start, length, is_signed=signed, conversion=conv, unit=unit)
-
-
-def vehicle_dbc() -> Database:
-    """The DBC of configs/mapping_can_example.yaml; units km/h, deg/s, MPa, Nm, deg."""
-    gear = {0: "P", 1: "R", 2: "N", 3: "D"}
-    msgs = [
-        Message(
-            0x100, "ESP", 8, [_sig("VehSpd", 0, 0.01, "km/h"), _sig("YawRate", 16, 0.01, "deg/s")]
-        ),
-        Message(
-            0x120, "IMU", 8, [_sig("AccX", 0, 0.001, "m/s^2"), _sig("AccY", 16, 0.001, "m/s^2")]
-        ),
-        Message(
-            0x130,
-            "BRK",
-            8,
-            [_sig("BrkPrs", 0, 0.001, "MPa", signed=False), _sig("DecelReq", 16, 0.001, "m/s^2")],
-        ),
-        Message(
-            0x18FF0140,
-            "MOT",
-            8,
-            [_sig("MotTrq", 0, 0.1, "Nm"), _sig("MotTrqReq", 16, 0.1, "Nm")],
-            is_extended_frame=True,
-        ),
-        Message(
-            0x150,
-            "STR",
-            8,
-            [_sig("StrWhlAng", 0, 0.1, "deg"), _sig("StrWhlAngReq", 16, 0.1, "deg")],
-        ),
-        Message(0x160, "GEAR", 1, [_sig("GearPos", 0, 1, signed=False, length=8, choices=gear)]),
-    ]
-    return Database(messages=msgs)
-
-
-# Analytic signals in schema units, t in s from the first frame.
-SIGNALS: dict[str, tuple[str, str, Callable, float]] = {
-    # schema channel: (message, signal, f(t) in schema units, factor schema -> DBC unit)
-    "vx": ("ESP", "VehSpd", lambda t: 1.5 * np.sin(2 * np.pi * t / 6), KMH_PER_MS),
-    "yaw_rate": ("ESP", "YawRate", lambda t: 0.3 * np.sin(2 * np.pi * t / 4), DEG_PER_RAD),
-    "ax": ("IMU", "AccX", lambda t: 0.5 * t - 1.0, 1.0),
-    "ay": ("IMU", "AccY", lambda t: -0.25 * t + 0.5, 1.0),
-    "brake_pressure": ("BRK", "BrkPrs", lambda t: t + 5.0, 0.1),
-    "decel_cmd": ("BRK", "DecelReq", lambda t: -2.0 + 0.1 * t, 1.0),
-    "torque": ("MOT", "MotTrq", lambda t: 50.0 + 10.0 * t, 1.0),
-    "torque_cmd": ("MOT", "MotTrqReq", lambda t: 55.0 + 10.0 * t, 1.0),
-    "steer": ("STR", "StrWhlAng", lambda t: 100.0 * np.sin(2 * np.pi * t / 5), 1.0),
-    "steer_cmd": ("STR", "StrWhlAngReq", lambda t: 20.0 * t, 1.0),
-}
-# message: (first frame s, period s, last frame s); BRK starts late, MOT is off the grid
-TIMING = {
-    "ESP": (0.0, 0.02, 6.0),
-    "IMU": (0.003, 0.01, 6.0),
-    "BRK": (0.237, 0.05, 6.0),
-    "MOT": (0.005, 0.01, 6.0),
-    "STR": (0.0, 0.01, 6.0),
-}
-
-
-def _frame_times(msg: str) -> np.ndarray:
-    t0, period, t1 = TIMING[msg]
-    return t0 + np.arange(int(np.floor((t1 - t0) / period + 1e-9)) + 1) * period
-
-
-def frames(db: Database) -> list[can.Message]:
-    """Every frame of the test drive, sorted by time: cyclic messages plus gear events."""
-    out = []
-    for name in TIMING:
-        msg = db.get_message_by_name(name)
-        for t in _frame_times(name):
-            data = {
-                s: SIGNALS[c][2](t) * SIGNALS[c][3]
-                for c, (m, s, _, _) in SIGNALS.items()
-                if m == name
-            }
-            out.append((t, msg, data))
-    gear = db.get_message_by_name("GEAR")
-    out += [(t, gear, {"GearPos": label}) for t, label in GEAR_EVENTS]
-    out.sort(key=lambda x: x[0])
-    return [
-        can.Message(
-            timestamp=EPOCH + t,
-            arbitration_id=msg.frame_id,
-            is_extended_id=msg.is_extended_frame,
-            data=msg.encode(data),
-            channel=0,
-        )
-        for t, msg, data in out
-    ]
-
-
-def write_log(path: Path, messages: list[can.Message]) -> Path:
-    writer = can.BLFWriter(str(path)) if path.suffix == ".blf" else can.ASCWriter(str(path))
-    for m in messages:
-        writer.on_message_received(m)
-    writer.stop()
-    return path
-
-
-def setup_logs(folder: Path, suffix: str = ".blf", messages=None, name="park_in_left_r1"):
-    """The DBC as vehicle.dbc and the example mapping beside it, and one log; -> mapping."""
-    folder.mkdir(parents=True, exist_ok=True)
-    db = vehicle_dbc()
-    (folder.parent / "vehicle.dbc").write_text(db.as_dbc_string())
-    shutil.copy(EXAMPLE, folder.parent / "mapping.yaml")
-    write_log(folder / f"{name}{suffix}", frames(db) if messages is None else messages)
-    return folder.parent / "mapping.yaml"
+from parknss.signals import REQUIRED_CHANNELS
 
 
 @pytest.fixture(scope="module", params=[".blf", ".asc"])
@@ -152,7 +41,7 @@ def drive(request, tmp_path_factory):
 def _held(name: str, t: np.ndarray) -> np.ndarray:
     """The value of the last frame at or before each t (what a ZOH must give), schema units."""
     msg, sig, f, factor = SIGNALS[name]
-    ft = _frame_times(msg)
+    ft = frame_times(msg)
     db = vehicle_dbc()
     m = db.get_message_by_name(msg)
     quantized = np.array(
@@ -179,7 +68,7 @@ def test_signals_are_decoded_and_held_on_the_100hz_grid(drive):
         np.testing.assert_allclose(tr[name], _held(name, t), rtol=0, atol=1e-9, err_msg=name)
     # held, not interpolated: only values that were sent (MOT frames are 5 ms off the grid)
     for name in ("torque", "ax", "brake_pressure"):
-        sent = _held(name, _frame_times(SIGNALS[name][0]) + 1e-9)
+        sent = _held(name, frame_times(SIGNALS[name][0]) + 1e-9)
         assert set(np.round(tr[name], 9)) <= set(np.round(sent, 9)), name
     prov = json.loads(tr.provenance)
     assert "'BRK'" in prov["start_limited_by"] and prov["span_s"][0] == pytest.approx(0.237)
@@ -268,6 +157,11 @@ def test_a_short_frame_is_masked_and_counted(tmp_path):
     prov = json.loads(tr.provenance)
     assert prov["short_frames"] == {"steer_cmd#0": 1}
     assert tr.n == 575  # the other frames of the message still carry the signal
+    camp = import_folder(tmp_path / "logs", mapping)  # describe names them
+    summary = describe_campaign(camp)
+    assert summary.short_frames == {"park_in_left_r1": {"steer_cmd#0": 1}}
+    assert ("frames shorter than the DBC length (masked): park_in_left_r1: steer_cmd#0 1"
+            in summary.table())
 
 
 # ------------------------------------------------------------------- malformed logs
@@ -434,3 +328,34 @@ def test_can_sources_in_the_mapping_are_checked(tmp_path):
     csv = write_trial(read_campaign("campaigns/default")[0], tmp_path / "park_in_left_r1.csv")
     with pytest.raises(DataError, match=r"channel 'gear': the mapping gives a CAN message 'GEAR'"):
         read_trial(csv, EXAMPLE)  # a CAN mapping on a CSV log
+
+
+def test_a_validity_signal_gates_a_channel(tmp_path):
+    src = tmp_path / "logs"
+    mapping = setup_logs(src, ".blf")
+    doc = yaml.safe_load(mapping.read_text())
+    doc["channels"]["vx"]["valid_if"] = {"message": "GEAR", "signal": "GearPos",
+                                         "equals": ["R", "D"]}
+    mapping.write_text(yaml.safe_dump(doc))
+    trial = read_trial(src / "park_in_left_r1.blf", mapping)
+    # valid from the change to R (1.234 s) to the change to N (4.005 s); the gear
+    # channel itself is not gated
+    assert trial["t"][0] == pytest.approx(1.24) and trial["t"][-1] == pytest.approx(4.0)
+    assert json.loads(trial.provenance)["masked_samples"]
+
+
+def test_a_dbc_signal_without_a_unit_needs_the_mappings_unit(tmp_path, capsys):
+    src = tmp_path / "logs"
+    mapping = setup_logs(src, ".blf")
+    db = vehicle_dbc()
+    db.get_message_by_name("BRK").get_signal_by_name("BrkPrs").unit = None
+    (tmp_path / "vehicle.dbc").write_text(db.as_dbc_string())
+    with pytest.raises(DataError, match=r"channel 'brake_pressure' \(message 'BRK', signal "
+                                        r"'BrkPrs'\): the DBC gives the signal no unit; state "
+                                        r"it in the mapping \(channels.brake_pressure.unit"):
+        read_trial(src / "park_in_left_r1.blf", mapping)
+    doc = yaml.safe_load(mapping.read_text())
+    doc["channels"]["brake_pressure"]["unit"] = "MPa"
+    mapping.write_text(yaml.safe_dump(doc))
+    trial = read_trial(src / "park_in_left_r1.blf", mapping)
+    assert 10.0 < trial["brake_pressure"].max() < 11.5  # t + 5 bar, converted from MPa

@@ -73,8 +73,8 @@ def register(app: typer.Typer) -> None:
         mapping: Path | None = typer.Option(None, "--mapping", help="Channel-mapping YAML."),
         overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     ) -> None:
-        """Turn a folder of real logs (.csv, .parquet, .mat, .mf4, .blf/.asc) into a campaign."""
-        from parknss.data.io import import_folder, write_campaign
+        """Turn a folder of real logs (.csv, .parquet, .mat, .mf4, CAN traces) into a campaign."""
+        from parknss.data.io import import_folder, skipped_summary, write_campaign
         from parknss.errors import DataError
         from parknss.outputs import check_writable
 
@@ -85,5 +85,7 @@ def register(app: typer.Typer) -> None:
         campaign = import_folder(src, mapping=mapping)
         write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"imported {len(campaign)} trials to {out}", err=True)
+        if (skipped := skipped_summary(campaign)) is not None:
+            typer.echo(skipped, err=True)
 
     app.add_typer(sub, name="campaign")

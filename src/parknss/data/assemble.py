@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from parknss.data.mapping import ChannelMapping, ChannelSource
+from parknss.data.mapping import GATE_SUFFIX, ChannelMapping, ChannelSource, ValidIf
 from parknss.data.resample import Series, check_series, grid_between, hold, linear
 from parknss.errors import DataError
 from parknss.signals import (
@@ -62,6 +62,9 @@ class LogRead:
         table: a table log (one shared time column): may be taken row for row.
         meta: the file's parknss_trial metadata, if any.
         provenance: the reader's own provenance entries (DBC, buses, ...).
+        unit_required: a source without a unit of its own (a DBC signal with an empty
+            unit) needs the mapping's ``unit`` (refused otherwise, rather than taken to
+            be the schema unit).
     """
 
     series: list[Series]
@@ -70,6 +73,7 @@ class LogRead:
     table: bool = False
     meta: dict = field(default_factory=dict)
     provenance: dict = field(default_factory=dict)
+    unit_required: bool = False
 
 
 @dataclass(frozen=True)
@@ -240,6 +244,8 @@ def _check_finite(s: Series, values: np.ndarray, source: str) -> None:
 def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None, **changes) -> Series:
     """The samples ``keep`` of a series (``values``: already taken from them), with other
     fields changed; error locations still point into the source."""
+    if keep.all():  # nothing dropped: share the arrays (a long log is not copied)
+        return replace(s, values=s.values if values is None else values, **changes)
     idx = np.flatnonzero(keep)
     locate = s.locate
     return replace(
@@ -251,10 +257,39 @@ def _subset(s: Series, keep: np.ndarray, values: np.ndarray | None = None, **cha
     )
 
 
-def prepare(s: Series, m: ChannelMapping, source: str) -> _Prepared:
-    """Steps 1-2 for one series: drop invalid samples, map enumerations, check numbers."""
+def _gate_ok(gate: Series, rule: ValidIf) -> np.ndarray:
+    """Per gate sample: is its value one of ``rule.equals`` (numbers or text)."""
+    v = gate.values
+    nums = [x for x in (_as_number(e) for e in rule.equals) if x is not None]
+    texts = {str(e).strip() for e in rule.equals if isinstance(e, str)}
+    if v.dtype.kind in "OSU":
+        out = np.array([str(e).strip() in texts for e in v], dtype=bool)
+        for x in nums:
+            out |= np.array([_text_equals_number(e, x) for e in v], dtype=bool)
+        return out
+    out = np.zeros(len(v), dtype=bool)
+    for x in nums:
+        out |= _equal(v, x)
+    return out
+
+
+def gated(s: Series, gate: Series, rule: ValidIf, tol: float) -> np.ndarray:
+    """Samples of ``s`` the gate marks invalid: its last value at or before each sample
+    time (± tol) is not valid, or there is none yet. Bool (N,)."""
+    ok = _gate_ok(gate, rule)
+    idx = np.searchsorted(gate.t, s.t + tol, side="right") - 1
+    return (idx < 0) | ~ok[np.clip(idx, 0, None)]
+
+
+def prepare(
+    s: Series, m: ChannelMapping, source: str, extra_bad: np.ndarray | None = None
+) -> _Prepared:
+    """Steps 1-2 for one series: drop invalid samples (``extra_bad``: those its validity
+    signal marks), map enumerations, check numbers."""
     spec = spec_of(m, s.channel)
     bad = _invalid_mask(s, spec)
+    if extra_bad is not None:
+        bad |= extra_bad
     values = _map_values(_subset(s, ~bad), spec, source)
     if spec.valid_range is not None and s.values.dtype.kind in "OSU":
         lo, hi = spec.valid_range
@@ -418,7 +453,13 @@ def _no_span(prepared, source: str, window, log_start: float) -> None:
 # ------------------------------------------------------------------ 5: values
 
 
-def _file_unit(series: list[Series], spec: ChannelSource, use_file_units: bool, source: str):
+def _file_unit(
+    series: list[Series],
+    spec: ChannelSource,
+    use_file_units: bool,
+    source: str,
+    unit_required: bool = False,
+):
     """The unit to convert from: the mapping's, else the sources' own, else None."""
     if spec.unit is not None:
         return spec.unit
@@ -433,6 +474,11 @@ def _file_unit(series: list[Series], spec: ChannelSource, use_file_units: bool, 
             f"({', '.join(sorted(units))}); set the channel's unit in the mapping"
         )
     unit = units.pop()
+    if not unit and unit_required and ch.unit != "-":
+        raise DataError(
+            f"{source}: {series[0].label}: the DBC gives the signal no unit; state it in "
+            f"the mapping (channels.{channel}.unit, e.g. {ch.unit!r} if it is in {ch.unit})"
+        )
     if not unit:
         return None
     if canonical_unit(unit) is None:
@@ -457,14 +503,16 @@ def channel_values(
     use_file_units: bool,
     source: str,
     clipped: dict,
+    unit_required: bool = False,
 ) -> np.ndarray:
     """Step 5 for one schema channel on the grid: combine, scale, unit, sign, clip."""
     if spec.combine == "sum":
         v = np.sum(parts, axis=0)
     else:
         v = np.mean(parts, axis=0) if len(parts) > 1 else np.asarray(parts[0], dtype=np.float64)
-    v = v * spec.scale + spec.offset
-    unit = _file_unit(series, spec, use_file_units, source)
+    if spec.scale != 1.0 or spec.offset != 0.0:
+        v = v * spec.scale + spec.offset
+    unit = _file_unit(series, spec, use_file_units, source, unit_required)
     if unit is not None:
         v = convert_to_schema(v, unit, name)
     if spec.invert:
@@ -512,7 +560,8 @@ def to_channels(
             continue  # not in the log: the reader or validation names it
         parts = [values[s.key] for s in series]
         out[name] = channel_values(
-            name, spec, parts, series, out.get("gear"), read.use_file_units, source, clipped
+            name, spec, parts, series, out.get("gear"), read.use_file_units, source, clipped,
+            read.unit_required,
         )
     for name, series in by_channel.items():
         if name.startswith(TRUTH_PREFIX):
@@ -568,7 +617,21 @@ def assemble(
         raise DataError(f"{source}: no channels to read (check the mapping)")
     for s in read.series:
         check_series(s, source)
-    prepared = [prepare(s, m, source) for s in read.series]
+    gates = {s.channel[: -len(GATE_SUFFIX)]: s for s in read.series
+             if s.channel.endswith(GATE_SUFFIX)}
+    series = [s for s in read.series if not s.channel.endswith(GATE_SUFFIX)]
+    read = replace(read, series=series)
+    prepared = []
+    tol = m.resample.time_tolerance_s
+    for s in series:
+        rule = m.source(s.channel).valid_if if s.channel in CHANNEL_BY_NAME else None
+        extra = None
+        if rule is not None:
+            if s.channel not in gates:
+                raise DataError(f"{source}: {s.label}: valid_if is read from CSV, Parquet, "
+                                ".mat and CAN logs only")
+            extra = gated(s, gates[s.channel], rule, tol)
+        prepared.append(prepare(s, m, source, extra))
     masked = {p.s.label: p.n_masked for p in prepared if p.n_masked}
     base = {"source_file": source, "format": read.fmt, **read.provenance}
     rate = _rate_hz(read)
@@ -583,7 +646,6 @@ def assemble(
             prov["clipped_samples"] = clipped
         return [Assembled(channels, prov)]
     parts, info = stretches(prepared, m, source, window)
-    tol = m.resample.time_tolerance_s
     out = []
     for k, st in enumerate(parts):
         g = grid_between(st.start, st.end, tol)

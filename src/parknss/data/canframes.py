@@ -6,6 +6,7 @@ not pile up in memory):
 
 * ``.blf`` (Vector binary logging) and ``.asc`` (Vector ASCII): python-can's readers,
   with the truncation checks python-can leaves out.
+* ``.trc`` (PCAN-View, versions 1.0, 1.1, 1.3, 2.0 and 2.1): python-can's reader.
 * candump ``.log`` (``(1700000000.123456) can0 123#DEADBEEF``): a vectorised reader.
 * SavvyCAN "GVRET" ``.csv`` (``Time Stamp,ID,Extended,[Dir,]Bus,LEN,D1,...``, time
   stamps in microseconds, hex ids and bytes): a vectorised reader; recognised by its
@@ -46,7 +47,10 @@ KINDS: dict[str, str] = {
     "candump": "candump .log",
     "gvret": "GVRET .csv log",
     "mdf": "MDF4 bus logging file",
+    "trc": "PCAN .trc log",
 }
+TRC_VERSIONS = ("1.0", "1.1", "1.3", "2.0", "2.1")  # the PCAN-View versions python-can reads
+TRC_HEADER_LINES = 200  # how far into a .trc the ;$FILEVERSION line is looked for
 CAN_ERR_FLAG = 0x20000000  # candump: error frame
 EXT_BIT = 1 << 31  # (id, extended) packed as id | EXT_BIT for lookups
 DLC_TO_LEN = np.array([0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64], dtype=np.uint8)
@@ -310,6 +314,54 @@ def read_asc(path: Path, wanted: Wanted = None) -> FrameTable:
     except Exception as exc:  # python-can raises ValueError, IndexError... on bad lines
         raise DataError(
             f"{path}: not a readable .asc log, corrupt or truncated (line {lines.n}, after "
+            f"frame {out.n_frames + out.n_skipped}: {one_line(exc)})"
+        ) from exc
+    finally:
+        lines.close()
+    return out.table()
+
+
+def _trc_version(path: Path) -> str:
+    """The ;$FILEVERSION of a .trc (1.0 when it has none); DataError for one python-can
+    does not read."""
+    with open(path, encoding="latin-1") as f:
+        for _, line in zip(range(TRC_HEADER_LINES), f, strict=False):
+            text = line.strip()
+            if text.upper().startswith(";$FILEVERSION"):
+                version = text.split("=", 1)[-1].strip()
+                if version not in TRC_VERSIONS:
+                    raise DataError(
+                        f"{path}: .trc file version {version!r} is not one parknss reads "
+                        f"({', '.join(TRC_VERSIONS)}); save the trace as version 2.1 in "
+                        "PCAN-View"
+                    )
+                return version
+            if text and not text.startswith(";"):
+                break
+    return "1.0"
+
+
+def read_trc(path: Path, wanted: Wanted = None) -> FrameTable:
+    """A PCAN-View .trc log (versions 1.0, 1.1, 1.3, 2.0, 2.1) through python-can's
+    TRCReader; the file's bus n (from 1) is bus n - 1. Time stamps are the file's start
+    time plus each frame's offset (version 1.0: the offset alone)."""
+    import can
+
+    _trc_version(path)
+    out = _Collector("trc", wanted)
+    lines = _CountingLines(open(path, encoding="latin-1"))  # noqa: SIM115 (closed below)
+
+    def messages() -> Iterator[Any]:
+        for msg in can.TRCReader(lines):
+            if isinstance(msg.channel, int):
+                msg.channel = max(msg.channel - 1, 0)
+            yield msg
+
+    try:
+        _drain(messages(), out)
+    except Exception as exc:  # python-can raises ValueError, KeyError... on bad lines
+        raise DataError(
+            f"{path}: not a readable .trc log, corrupt or truncated (line {lines.n}, after "
             f"frame {out.n_frames + out.n_skipped}: {one_line(exc)})"
         ) from exc
     finally:
@@ -813,6 +865,7 @@ READERS = {
     "candump": read_candump,
     "gvret": read_gvret_csv,
     "mdf": read_mdf_bus_logging,
+    "trc": read_trc,
 }
 
 
@@ -823,6 +876,7 @@ SUFFIX_KINDS = {
     ".csv": "gvret",
     ".mf4": "mdf",
     ".mdf": "mdf",
+    ".trc": "trc",
 }
 
 
@@ -834,7 +888,7 @@ def log_kind(path: str | Path) -> str | None:
     """
     p = Path(path)
     suffix = p.suffix.lower()
-    if suffix in (".blf", ".asc", ".log"):
+    if suffix in (".blf", ".asc", ".log", ".trc"):
         return SUFFIX_KINDS[suffix]
     if suffix == ".csv":
         return "gvret" if is_gvret_csv(p) else None
@@ -859,8 +913,8 @@ def read_frames(path: str | Path, wanted: Wanted = None, kind: str | None = None
     kind = kind or log_kind(p) or SUFFIX_KINDS.get(p.suffix.lower())
     if kind not in READERS:
         raise DataError(
-            f"{p}: not a CAN bus log parknss reads (.blf, .asc, candump .log, GVRET .csv, "
-            "MDF4 bus logging)"
+            f"{p}: not a CAN bus log parknss reads (.blf, .asc, .trc, candump .log, GVRET "
+            ".csv, MDF4 bus logging)"
         )
     if not p.is_file():
         raise DataError(f"{p}: file not found")

@@ -35,7 +35,8 @@ from parknss.data.mapping import CanOptions
 from parknss.data.resample import Series
 from parknss.errors import DataError
 
-CAN_SUFFIXES: tuple[str, ...] = (".blf", ".asc")  # CAN by suffix alone (also: .log, see canframes)
+# CAN by suffix alone (also: .log, see canframes)
+CAN_SUFFIXES: tuple[str, ...] = (".blf", ".asc", ".trc")
 
 
 @dataclass(frozen=True)

@@ -214,6 +214,28 @@ def write_asc(path: str | Path, frames: FrameTable) -> Path:
     return _write_python_can(path, frames, "ASCWriter")
 
 
+def write_trc(path: str | Path, frames: FrameTable, version: str = "2.1") -> Path:
+    """A PCAN .trc (python-can's TRCWriter, version 2.1 or 1.0; bus b is bus b + 1).
+
+    Version 2.1 keeps time offsets to 1 µs, 1.0 to 1 ms (and no start time).
+    """
+    import can
+    from can.io.trc import TRCFileVersion
+
+    versions = {"2.1": TRCFileVersion.V2_1, "1.0": TRCFileVersion.V1_0}
+    if version not in versions:
+        raise ValueError(f"python-can writes .trc versions {', '.join(versions)}, not {version}")
+    p = Path(path)
+    writer = can.TRCWriter(str(p))
+    writer.file_version = versions[version]
+    try:
+        for msg in _can_messages(frames):
+            writer.on_message_received(msg)
+    finally:
+        writer.stop()
+    return p
+
+
 def _hex_rows(data: np.ndarray, dlc: np.ndarray, sep: str) -> list[str]:
     digits = np.char.upper(np.char.mod("%02x", data))  # (N, W) of 2-character str
     return [sep.join(row[:n]) for row, n in zip(digits.tolist(), dlc.tolist(), strict=True)]
@@ -324,6 +346,7 @@ def write_mdf_bus_logging(path: str | Path, frames: FrameTable) -> Path:
 WRITERS: dict[str, Callable[[str | Path, FrameTable], Path]] = {
     ".blf": write_blf,
     ".asc": write_asc,
+    ".trc": write_trc,
     ".log": write_candump,
     ".csv": write_gvret_csv,
     ".mf4": write_mdf_bus_logging,

@@ -29,12 +29,12 @@ from typing import Any
 
 import numpy as np
 
-from parknss.errors import DataError, one_line
+from parknss.errors import DataError, ParknssWarning, one_line
 
 DBC_SUFFIXES: tuple[str, ...] = (".dbc",)  # text fixed up before parsing; other formats as is
 
 
-class DbcWarning(UserWarning):
+class DbcWarning(ParknssWarning):
     """Something in a DBC was tolerated (lenient load); the message is one line."""
 
 
@@ -85,17 +85,18 @@ _SECTION = re.compile(r"^[ \t]*(BS_|BU_)[ \t]*:", re.MULTILINE)
 _NS_LINE = re.compile(r"^[ \t]*NS_[ \t]*:", re.MULTILINE)
 
 
-def _fix_sections(text: str) -> tuple[str, list[str]]:
+def _fix_sections(text: str) -> tuple[str, list[str], int, int]:
     """Add empty ``BS_:``/``BU_:`` sections where a DBC lacks them.
 
     cantools reads the ``NS_`` symbol list up to the first ``word :``; without a
     ``BS_:`` line right after it, the first message is swallowed and parsing fails.
-    Returns the text to parse and the warning lines.
+    Returns the text to parse, the warning lines, the index of the first inserted line
+    and how many lines were inserted.
     """
     present = set(_SECTION.findall(text))
     missing = [s for s in ("BS_", "BU_") if s not in present]
     if not missing:
-        return text, []
+        return text, [], text.count("\n") + 1, 0
     insert = "".join(f"{s}:\n" for s in missing)
     ns = _NS_LINE.search(text)
     if ns is None:  # no symbol list: the sections can go anywhere; put them first
@@ -114,7 +115,196 @@ def _fix_sections(text: str) -> tuple[str, list[str]]:
                 break
     names = "/".join(f"{s}:" for s in missing)
     what = "sections (empty ones assumed)" if len(missing) > 1 else "section (empty one assumed)"
-    return text[:pos] + insert + text[pos:], [f"no {names} {what}"]
+    at = text[:pos].count("\n")
+    return text[:pos] + insert + text[pos:], [f"no {names} {what}"], at, len(missing)
+
+
+# ------------------------------------------------------------------ lenient repairs
+
+# Statements of a DBC that end with ';' (the others: VERSION, NS_, BS_, BU_, BO_, SG_).
+_SEMI_KEYWORDS = (
+    "CM_", "VAL_", "VAL_TABLE_", "BA_DEF_", "BA_DEF_DEF_", "BA_", "SIG_VALTYPE_",
+    "SG_MUL_VAL_", "BO_TX_BU_", "EV_", "ENVVAR_DATA_", "SIG_GROUP_", "BA_DEF_REL_",
+    "BA_REL_", "BA_DEF_DEF_REL_", "SIG_TYPE_REF_", "SGTYPE_", "SGTYPE_VAL_", "CAT_DEF_",
+    "CAT_", "FILTER", "BA_DEF_SGTYPE_", "BA_SGTYPE_", "SIG_TYPE_DEF_",
+)
+_ALL_KEYWORDS = ("VERSION", "NS_", "BS_", "BU_", "BO_", "SG_", *_SEMI_KEYWORDS)
+_KEYWORD_LINE = re.compile(r"^[ \t]*(" + "|".join(sorted(_ALL_KEYWORDS, key=len, reverse=True))
+                           + r")(?=[\s:]|$)")
+_IMPORT = re.compile(r'^[ \t]*CM_[ \t]+"IMPORT[ \t]+([^"]+?)[ \t]*"[ \t]*;?[ \t]*$')
+_CM_STRING = re.compile(
+    r'^(\s*CM_\s+(?:(?:BU_|EV_)\s+\S+\s+|BO_\s+\d+\s+|SG_\s+\d+\s+\S+\s+)?)"(.*)"(\s*;\s*)$',
+    re.DOTALL,
+)
+_UNESCAPED_QUOTE = re.compile(r'(?<!\\)"')
+_BO_LINE = re.compile(r"^[ \t]*BO_[ \t]+(\d+)[ \t]+(\w+)")
+_SG_LINE = re.compile(r"^[ \t]*SG_[ \t]+(\w+)")
+_VAL_LINE = re.compile(r"^[ \t]*VAL_[ \t]+(\d+)[ \t]+(\w+)")
+_ID_REFS = (  # statements that name a message by its id (rewritten with the id)
+    re.compile(r"^([ \t]*(?:VAL_|SG_MUL_VAL_|SIG_VALTYPE_|BO_TX_BU_|BO_)[ \t]+)(\d+)\b"),
+    re.compile(r"^([ \t]*CM_[ \t]+(?:BO_|SG_)[ \t]+)(\d+)\b"),
+    re.compile(r'^([ \t]*BA_[ \t]+"[^"]*"[ \t]+(?:BO_|SG_)[ \t]+)(\d+)\b'),
+)
+EXTENDED_FLAG = 0x80000000  # DBC: bit 31 of a BO_ id marks an extended (29-bit) frame id
+
+
+@dataclass
+class _Text:
+    """A DBC's lines with, for each, the file and line number it comes from."""
+
+    lines: list[str]
+    origin: list[tuple[Path, int] | None]
+
+    def where(self, i: int, main: Path) -> str:
+        """'line N' (of the main file) or 'line N of other.dbc' for line index i."""
+        o = self.origin[i] if 0 <= i < len(self.origin) else None
+        if o is None:
+            return "an inserted line"
+        path, n = o
+        return f"line {n}" if path == main else f"line {n} of {path.name}"
+
+
+def _expand_imports(path: Path, stack: tuple[Path, ...] = ()) -> _Text:
+    """The DBC's lines with every ``CM_ "IMPORT file.dbc";`` replaced by that file's
+    lines (relative to the importing file's folder, recursively; a cycle or a missing
+    file is a DataError naming the line)."""
+    real = path.resolve()
+    text = path.read_bytes().decode("cp1252", errors="replace")
+    out = _Text([], [])
+    for n, line in enumerate(text.split("\n"), start=1):
+        m = _IMPORT.match(line.rstrip("\r"))
+        if m is None:
+            out.lines.append(line)
+            out.origin.append((path, n))
+            continue
+        target = path.parent / m.group(1)
+        chain = (*stack, real)
+        if target.resolve() in chain:
+            names = " -> ".join(p.name for p in (*chain, target.resolve()))
+            raise DataError(f"DBC file {path}: line {n}: IMPORT cycle ({names}); remove one")
+        if not target.is_file():
+            raise DataError(
+                f"DBC file {path}: line {n}: imported file {m.group(1)!r} not found in "
+                f"{path.parent}"
+            )
+        sub = _expand_imports(target, chain)
+        out.lines += sub.lines
+        out.origin += sub.origin
+    return out
+
+
+def _drop_repeated_headers(t: _Text) -> None:
+    """After imports, keep only the first VERSION, NS_ block, BS_ and BU_ (later ones
+    blanked, line numbers kept); BU_ node names of later ones are merged into the first."""
+    seen: dict[str, int] = {}
+    in_ns = False
+    for i, line in enumerate(t.lines):
+        m = _KEYWORD_LINE.match(line)
+        if in_ns:
+            if not line.strip() or line[:1].isspace():
+                t.lines[i] = ""
+                continue
+            in_ns = False
+        if m is None or m.group(1) not in ("VERSION", "NS_", "BS_", "BU_"):
+            continue
+        kw = m.group(1)
+        if kw not in seen:
+            seen[kw] = i
+            continue
+        if kw == "BU_":
+            nodes = line.split(":", 1)[1].split() if ":" in line else []
+            first = seen["BU_"]
+            have = t.lines[first].split(":", 1)[1].split() if ":" in t.lines[first] else []
+            add = [x for x in nodes if x not in have]
+            if add:
+                t.lines[first] = t.lines[first].rstrip("\r") + " " + " ".join(add)
+        t.lines[i] = ""
+        in_ns = kw == "NS_"
+
+
+def _statements(t: _Text) -> Iterator[tuple[str, int, int]]:
+    """(keyword, first line index, end index) of every ';'-terminated statement: from its
+    keyword to its ';' or to the line before the next keyword line."""
+    n = len(t.lines)
+    i = 0
+    while i < n:
+        m = _KEYWORD_LINE.match(t.lines[i])
+        if m is None or m.group(1) not in _SEMI_KEYWORDS or not t.lines[i][m.end():].strip():
+            i += 1
+            continue
+        j = i
+        while True:
+            if t.lines[j].rstrip().endswith(";"):
+                j += 1
+                break
+            j += 1
+            if j >= n or _KEYWORD_LINE.match(t.lines[j]):
+                break
+        yield m.group(1), i, j
+        i = j
+
+
+def _repair_statements(t: _Text, main: Path, notes: list[str]) -> None:
+    """A missing closing ';' added; unescaped quotes inside a CM_ comment escaped."""
+    for kw, i, j in list(_statements(t)):
+        last = max((k for k in range(i, j) if t.lines[k].strip()), default=i)
+        if not t.lines[last].rstrip().endswith(";"):
+            t.lines[last] = t.lines[last].rstrip() + " ;"
+            notes.append(f"{t.where(last, main)}: {kw} statement has no closing ';' (added)")
+        if kw != "CM_":
+            continue
+        body = "\n".join(t.lines[i:j])
+        m = _CM_STRING.match(body)
+        if m is None or not _UNESCAPED_QUOTE.search(m.group(2)):
+            continue
+        fixed = m.group(1) + '"' + _UNESCAPED_QUOTE.sub(r"\\\"", m.group(2)) + '"' + m.group(3)
+        t.lines[i:j] = fixed.split("\n")
+        notes.append(f"{t.where(i, main)}: CM_ comment has unescaped quotes (read as text)")
+
+
+def _repair_references(t: _Text, main: Path, notes: list[str]) -> None:
+    """Standard ids beyond 11 bits read as extended ids; VAL_ tables of signals that do
+    not exist dropped (each one warning line)."""
+    signals: dict[int, set[str]] = {}
+    current: int | None = None
+    promote: dict[int, int] = {}
+    for i, line in enumerate(t.lines):
+        bo = _BO_LINE.match(line)
+        if bo is not None:
+            current = int(bo.group(1))
+            signals.setdefault(current, set())
+            if 0x7FF < current < EXTENDED_FLAG:
+                promote[current] = current | EXTENDED_FLAG
+                notes.append(
+                    f"{t.where(i, main)}: message {bo.group(2)!r}: standard frame id "
+                    f"0x{current:X} is more than 11 bits (read as an extended id)"
+                )
+            continue
+        sg = _SG_LINE.match(line)
+        if sg is not None and current is not None:
+            signals[current].add(sg.group(1))
+    for kw, i, j in list(_statements(t)):
+        if kw != "VAL_":
+            continue
+        m = _VAL_LINE.match(t.lines[i])
+        if m is None:
+            continue
+        mid, sig = int(m.group(1)), m.group(2)
+        if mid in signals and sig in signals[mid]:
+            continue
+        what = f"message id {mid} has no signal {sig!r}" if mid in signals else (
+            f"no message has id {mid}")
+        notes.append(f"{t.where(i, main)}: VAL_ table for {sig!r} unused ({what}; ignored)")
+        for k in range(i, j):
+            t.lines[k] = ""
+    if promote:
+        for i, line in enumerate(t.lines):
+            for rx in _ID_REFS:
+                m = rx.match(line)
+                if m is not None and int(m.group(2)) in promote:
+                    new = str(promote[int(m.group(2))])
+                    t.lines[i] = m.group(1) + new + line[m.end():]
+                    break
 
 
 def _bit_mask(signal: Any) -> int:
@@ -183,25 +373,69 @@ def _captured_log(lines: list[str]) -> Iterator[None]:
         log.propagate = propagate
 
 
+class _UnreadableError(Exception):
+    """cantools refused the text; the message names the line of the file it came from."""
+
+
+_AT_LINE = re.compile(r"at line (\d+)(?:, column \d+)?")
+
+
+def _cantools_error(exc: Exception, t: _Text, main: Path, at: int, added: int) -> _UnreadableError:
+    """cantools' error with its line number turned into the file's own line."""
+
+    def back(m: re.Match) -> str:
+        i = int(m.group(1)) - 1  # index in the text parsed
+        if i >= at:
+            i -= added  # the inserted BS_:/BU_: lines
+        return "at " + t.where(i, main)
+
+    text = " ".join(str(exc).split()).replace(">>!<<", "")
+    text = re.sub(r'^DBC: "(.*)"$', r"\1", text)
+    return _UnreadableError(_AT_LINE.sub(back, text))
+
+
 def _parse(path: Path, strict: bool) -> tuple[Any, list[str]]:
-    """(cantools Database, warning lines); exceptions of cantools pass through."""
+    """(cantools Database, warning lines); exceptions of cantools pass through.
+
+    A .dbc is read as text first: ``CM_ "IMPORT file.dbc";`` lines are replaced by that
+    file (relative to the importing file's folder; repeated headers dropped); leniently,
+    a missing closing ';', unescaped quotes in a CM_ comment, a VAL_ table of a signal
+    that does not exist and a standard id beyond 11 bits (read as extended) are repaired,
+    each one warning line with the file's own line number.
+    """
     import cantools
 
     notes: list[str] = []
     with _captured_log(notes):
         if path.suffix.lower() in DBC_SUFFIXES:
-            text = path.read_bytes().decode("cp1252", errors="replace")
-            fixed, missing = _fix_sections(text)
+            t = _expand_imports(path)
+            if len({o[0] for o in t.origin if o is not None}) > 1:
+                _drop_repeated_headers(t)
+            if not strict:
+                _repair_statements(t, path, notes)
+                _repair_references(t, path, notes)
+            text = "\n".join(t.lines)
+            fixed, missing, at, added = _fix_sections(text)
             notes[:0] = missing
-            db = cantools.database.load_string(
-                text if strict else fixed, database_format="dbc", strict=strict
-            )
+            if strict:
+                fixed, at, added = text, len(t.lines), 0
+            try:
+                db = cantools.database.load_string(fixed, database_format="dbc", strict=strict)
+            except Exception as exc:  # cantools raises many types for bad files
+                raise _cantools_error(exc, t, path, at, added) from exc
+            where = {}
+            for i, line in enumerate(t.lines):
+                bo = _BO_LINE.match(line)
+                if bo is not None:
+                    where.setdefault(bo.group(2), t.where(i, path))
         else:
             db = cantools.database.load_file(path, strict=strict)
+            where = {}
     if not hasattr(db, "get_message_by_name"):
         raise TypeError("not a CAN database")
     for message in db.messages:
-        notes += lint_message(message)
+        at_line = f"{where[message.name]}: " if message.name in where else ""
+        notes += [at_line + line for line in lint_message(message)]
     return db, notes
 
 
@@ -210,13 +444,16 @@ def _load_cached(path: Path, stamp: tuple[int, int], strict: bool) -> LoadedDbc:
     del stamp  # part of the cache key only: a changed file is loaded again
     try:
         db, notes = _parse(path, strict)
+    except DataError:
+        raise
     except Exception as exc:  # cantools raises many types for bad files
+        why = str(exc) if isinstance(exc, _UnreadableError) else one_line(exc)
         if strict:
             raise DataError(
-                f"DBC file {path}: refused in strict mode ({one_line(exc)}); set "
+                f"DBC file {path}: refused in strict mode ({why}); set "
                 "can.strict_dbc: false to load it leniently"
             ) from exc
-        raise DataError(f"DBC file {path}: not readable ({one_line(exc)})") from exc
+        raise DataError(f"DBC file {path}: not readable ({why})") from exc
     if strict and notes:
         more = f" (and {len(notes) - 1} more)" if len(notes) > 1 else ""
         raise DataError(
@@ -245,8 +482,22 @@ def load_dbc(path: str | Path, strict: bool = False) -> LoadedDbc:
     p = Path(path)
     if not p.is_file():
         raise DataError(f"DBC file {p} not found")
-    st = p.stat()
-    return _load_cached(p, (st.st_size, st.st_mtime_ns), bool(strict))
+    return _load_cached(p, _stamp(p), bool(strict))
+
+
+def _stamp(path: Path, seen: frozenset[Path] = frozenset()) -> tuple:
+    """(size, mtime) of the file and of every file it IMPORTs (the cache key)."""
+    st = path.stat()
+    out: tuple = ((str(path), st.st_size, st.st_mtime_ns),)
+    if path.suffix.lower() not in DBC_SUFFIXES or path.resolve() in seen:
+        return out
+    text = path.read_bytes().decode("cp1252", errors="replace")
+    for line in text.split("\n"):
+        m = _IMPORT.match(line.rstrip("\r"))
+        target = path.parent / m.group(1) if m is not None else None
+        if target is not None and target.is_file():
+            out += _stamp(target, seen | {path.resolve()})
+    return out
 
 
 # ------------------------------------------------------------------------ bit layout

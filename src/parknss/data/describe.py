@@ -51,6 +51,7 @@ from pydantic import Field, model_validator
 from scipy.optimize import minimize_scalar
 
 from parknss.config import StrictModel
+from parknss.data.signchecks import SignCheck, short_frames, sign_check, yaw_offset
 from parknss.data.trial import Campaign, Trial
 from parknss.data.validate import load_data_section
 from parknss.data.workflows import WorkflowSupport, campaign_channels, schema_order, support
@@ -58,8 +59,10 @@ from parknss.errors import DataError
 from parknss.signals import (
     BLIND_ZONE_MS,
     CHANNEL_BY_NAME,
+    DEG_PER_RAD,
     DT,
     REQUIRED_CHANNELS,
+    SAMPLE_RATE_HZ,
     moving_mask,
     ms_to_kmh,
 )
@@ -97,6 +100,12 @@ class DescribeConfig(StrictModel):
         clip_channels: the channels checked for clipping (schema names); by default the
             continuous measured ones (torque, brake pressure and the commands are held at
             set values by their ECUs, so a run at their max is normal).
+        sign_corr_min: a correlation of ax with dvx/dt (ay with vx·ω_z) below this flags
+            the channel as sign-inverted, (-) (:mod:`parknss.data.signchecks`).
+        sign_smooth_s: moving-average window of those correlations, s.
+        standstill_kmh: |vx| below this counts as standstill for the yaw offset, km/h.
+        yaw_offset_min_dps: a median yaw rate at standstill beyond this is an offset, °/s.
+        standstill_min_samples: fewer standstill samples than this: no offset check.
     """
 
     steer_ratio_bounds: tuple[float, float] = (5.0, 30.0)
@@ -107,6 +116,11 @@ class DescribeConfig(StrictModel):
     sentinel_gap_ratio: float = Field(0.5, gt=0.0)
     clip_min_run: int = Field(25, ge=2)
     clip_channels: tuple[str, ...] = MEASURED_CONTINUOUS
+    sign_corr_min: float = Field(-0.1, ge=-1.0, le=0.0)
+    sign_smooth_s: float = Field(0.25, ge=0.0)
+    standstill_kmh: float = Field(0.05, gt=0.0)
+    yaw_offset_min_dps: float = Field(0.1, ge=0.0)
+    standstill_min_samples: int = Field(100, ge=1)
 
     @model_validator(mode="after")
     def _ordered(self) -> DescribeConfig:
@@ -445,6 +459,8 @@ class CampaignSummary:
     unavailable: dict[str, str] = dataclasses.field(default_factory=dict)
     parking_speed_max_kmh: float = 20.0
     folds: FoldSummary | None = None
+    sign_checks: list[SignCheck] = dataclasses.field(default_factory=list)
+    short_frames: dict[str, dict[str, int]] = dataclasses.field(default_factory=dict)
 
     @property
     def absent_channels(self) -> tuple[str, ...]:
@@ -499,6 +515,8 @@ class CampaignSummary:
             "outside_parking_domain": self.outside_parking_domain,
             "flagged_trials": self.flagged_trials,
             "folds": None if self.folds is None else self.folds.to_json(),
+            "sign_checks": [c.to_json() for c in self.sign_checks],
+            "short_frames": dict(self.short_frames),
         }
 
     def _id_width(self) -> int:
@@ -562,6 +580,18 @@ class CampaignSummary:
         rows += [f"  {tid:<{w}} {f.channel:<15} {f.detail}" for tid, f in flags]
         return rows
 
+    def _sign_rows(self) -> list[str]:
+        rows = ["sign and offset checks:" if self.sign_checks else "sign and offset checks: n/a"]
+        for c in self.sign_checks:
+            rows.append(f"  {c.detail}")
+            if c.fix is not None:
+                rows.append(f"    fix in the mapping: {c.fix}")
+        if self.short_frames:
+            items = "; ".join(f"{tid}: " + ", ".join(f"{k} {n}" for k, n in d.items())
+                              for tid, d in self.short_frames.items())
+            rows.append(f"frames shorter than the DBC length (masked): {items}")
+        return rows
+
     def _workflow_rows(self) -> list[str]:
         rows = ["workflows:"]
         for name, w in self.workflows.items():
@@ -585,6 +615,7 @@ class CampaignSummary:
             *self._check_rows(),
             self._domain_row(),
             *self._flag_rows(),
+            *self._sign_rows(),
             *self._workflow_rows(),
         ]
         if self.folds is not None:
@@ -610,6 +641,7 @@ def describe_campaign(
         r2, fit = yaw_r2(vx, steer, yaw, g), fit_steer_ratio(vx, steer, yaw, g, cfg)
     else:
         r2 = fit = None
+    checks = sign_checks(campaign, channels, g, cfg)
     ranges = plausible_ranges()
     n_total = sum(tr.n for tr in campaign)
     n_moving = sum(int(np.sum(moving_mask(tr["vx"]))) for tr in campaign) if has_vx else None
@@ -630,4 +662,51 @@ def describe_campaign(
         unavailable=unavailable,
         parking_speed_max_kmh=cfg.parking_speed_max_kmh,
         folds=fold_summary(campaign),
+        sign_checks=checks,
+        short_frames=short_frames(campaign),
+    )
+
+
+def sign_checks(
+    campaign: Campaign, channels: tuple[str, ...], g: VehicleGeometry, cfg: DescribeConfig
+) -> list[SignCheck]:
+    """The sign checks of ax and ay and the yaw-rate offset (those the channels allow)."""
+    have = set(channels)
+    n = max(1, round(cfg.sign_smooth_s * SAMPLE_RATE_HZ))
+    out = []
+    if {"vx", "ax"} <= have:
+        out.append(sign_check(campaign, "ax", "dvx/dt",
+                              lambda tr: np.gradient(tr["vx"], tr["t"]), n, cfg.sign_corr_min))
+    if {"vx", "ay", "yaw_rate"} <= have:
+        out.append(sign_check(campaign, "ay", "vx·ω_z", lambda tr: tr["vx"] * tr["yaw_rate"],
+                              n, cfg.sign_corr_min))
+    if {"vx", "yaw_rate"} <= have:
+        out.append(_yaw_offset_check(campaign, "steer" in have, g, cfg))
+    return out
+
+
+def _yaw_offset_check(campaign: Campaign, steer: bool, g: VehicleGeometry,
+                      cfg: DescribeConfig) -> SignCheck:
+    off, n = yaw_offset(campaign, cfg.standstill_kmh)
+    where = f"yaw rate at standstill (|vx| < {cfg.standstill_kmh:g} km/h, {n} samples)"
+    if off is None or n < cfg.standstill_min_samples:
+        return SignCheck("yaw_offset", off, None, f"{where}: too few samples to check")
+    dps = off * DEG_PER_RAD
+    if abs(dps) <= cfg.yaw_offset_min_dps:
+        return SignCheck("yaw_offset", off, True, f"{where}: median {dps:.3f} °/s (no offset)")
+    extra: dict = {"offset_dps": dps}
+    after = ""
+    if steer:
+        vx, st, yaw = moving_samples(campaign)
+        r2 = yaw_r2(vx, st, yaw - off, g)
+        fit = fit_steer_ratio(vx, st, yaw - off, g, cfg)
+        extra |= {"yaw_r2_after": r2, "steer_ratio_fit_after": fit}
+        after = f"; after removing it: yaw R² {_na(r2, '.4f')}, steering-ratio fit " \
+                f"{_na(fit, '.3f')}"
+    return SignCheck(
+        "yaw_offset", off, False,
+        f"{where}: median {dps:.3f} °/s: an offset{after}",
+        f"yaw_rate: {{..., offset: {-dps:.4g}}} (yaw rate mapped in deg/s; "
+        f"{-off:.4g} in rad/s)",
+        extra,
     )

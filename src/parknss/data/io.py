@@ -30,11 +30,14 @@ from pydantic import Field, ValidationError
 from parknss.config import StrictModel, read_json
 from parknss.data.assemble import Assembled, LogRead, assemble
 from parknss.data.canlog import CAN_SUFFIXES
+from parknss.data.csvlog import read_csv_table
 from parknss.data.mapping import (
+    GATE_SUFFIX,
     ChannelMapping,
     Column,
     CsvOptions,
     as_mapping,
+    iter_gates,
     iter_sources,
     mapping_hint,
     resolve_dbc,
@@ -68,12 +71,15 @@ LOG_SUFFIXES: tuple[str, ...] = (
 )
 LOG_KINDS = (
     ".csv (table or SavvyCAN GVRET), .parquet, .mat, .mf4/.mdf (MDF4, decoded or bus logging) "
-    "or .blf/.asc/.log (CAN)"
+    "or .blf/.asc/.trc/.log (CAN)"
 )
 _NAME_RE = re.compile(r"^(?P<cls>[A-Za-z][A-Za-z0-9_]*?)_r(?P<rep>[0-9]+)$")
 _SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 Raw = tuple[dict[str, Column], dict]
+CSV_DIALECT = "__csv_dialect__"  # meta key: how a CSV was read (moved to the provenance)
+TIME_UNITS = (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+PLAUSIBLE_STEP_S = (1.0e-4, 1.0)  # a log's median time step: 10 kHz ... 1 Hz
 
 
 
@@ -128,7 +134,7 @@ def parse_numbers(
     """
     v = col.values
     if v.dtype.kind in "biuf":
-        return v.astype(np.float64)
+        return v.astype(np.float64, copy=False)
     text = [str(x).strip() for x in v]
     if decimal != ".":
         text = [x.replace(decimal, ".") for x in text]
@@ -175,19 +181,77 @@ def _check_table_time(t: np.ndarray, col: Column, source: str) -> None:
         )
 
 
+def find_column(raw: dict[str, Column], name: str) -> str | None:
+    """The column called ``name``: exactly, else the one whose name differs only in case."""
+    if name in raw:
+        return name
+    found = [c for c in raw if c.casefold() == name.casefold()]
+    return found[0] if len(found) == 1 else None
+
+
+def _time_unit(t: np.ndarray, m: ChannelMapping, col: Column, source: str) -> tuple[str, str]:
+    """(unit of the time column, how it was decided): the mapping's, the file's, or guessed
+    from the median step (the unit that makes it a rate of 1 Hz ... 10 kHz)."""
+    if "unit" in m.time.model_fields_set:
+        return m.time.unit, "mapping"
+    if col.unit:
+        return col.unit, "file"
+    steps = np.diff(t[: 100_001])
+    steps = steps[steps > 0]
+    if not len(steps):
+        return m.time.unit, "default"
+    med = float(np.median(steps))
+    for unit, factor in TIME_UNITS:
+        if PLAUSIBLE_STEP_S[0] <= med * factor <= PLAUSIBLE_STEP_S[1]:
+            return unit, f"guessed from the median step {med:g}"
+    raise DataError(
+        f"{source}: channel 't': median time step {med:g} is not a sampling rate of 1 Hz "
+        "to 10 kHz in s, ms, us or ns; state the unit with time.unit in the mapping"
+    )
+
+
 def table_read(raw: dict[str, Column], meta: dict, m: ChannelMapping, path: Path, fmt: str):
-    """Columns of a CSV/Parquet/.mat log -> the series of every mapped source."""
+    """Columns of a CSV/Parquet/.mat log -> the series of every mapped source.
+
+    Column names match exactly, else ignoring case; a column's own unit (a CSV bracket
+    or units row) is used when the mapping gives none. Without ``time.unit`` in the
+    mapping or the file, the time unit is guessed from the median step and stated in
+    the provenance (and a warning line).
+    """
     source = str(path)
     tsrc = m.time
-    if tsrc.column not in raw:
+    meta = dict(meta)
+    prov: dict = {}
+    dialect = meta.pop(CSV_DIALECT, None)
+    if dialect is not None:
+        prov["csv"] = dialect
+    tname = find_column(raw, tsrc.column)
+    if tname is None:
+        like = [c for c in raw if "time" in c.casefold() or c.casefold() in ("t", "ts")]
+        fix = f"; set time.column in the mapping (e.g. time.column: {like[0]!r})" if like else (
+            "; set time.column in the mapping")
         raise DataError(
             f"{source}: channel 't': time column {tsrc.column!r} not found "
-            f"(columns: {', '.join(raw)})"
+            f"(columns: {', '.join(raw)}){fix}"
         )
-    tlabel = "channel 't'" + (f" (column {tsrc.column!r})" if tsrc.column != "t" else "")
-    t = parse_numbers(raw[tsrc.column], tlabel, source, m.csv.decimal)
-    t = convert_to_schema(t, tsrc.unit, "t")
-    _check_table_time(t, raw[tsrc.column], source)
+    tlabel = "channel 't'" + (f" (column {tname!r})" if tname != "t" else "")
+    t = parse_numbers(raw[tname], tlabel, source, m.csv.decimal)
+    unit, how = _time_unit(t, m, raw[tname], source)
+    if how.startswith("guessed") and unit != m.time.unit:
+        import warnings
+
+        from parknss.errors import ParknssWarning
+
+        warnings.warn(
+            f"{source}: time unit {unit!r} {how} (set time.unit in the mapping to state it)",
+            ParknssWarning,
+            stacklevel=2,
+        )
+    if how != "mapping":
+        prov["time_unit"] = {"unit": unit, "from": how}
+    t = convert_to_schema(t, unit, "t")
+    _check_table_time(t, raw[tname], source)
+    file_units = False
     series: list[Series] = []
     for name, k, ref, spec in iter_sources(m):
         if ref.column is None:
@@ -195,14 +259,16 @@ def table_read(raw: dict[str, Column], meta: dict, m: ChannelMapping, path: Path
                 f"{source}: channel {name!r}: the mapping gives a CAN {ref.describe()}; "
                 "this log needs a 'column'"
             )
-        if ref.column not in raw:
+        cname = find_column(raw, ref.column)
+        if cname is None:
             if not m.is_mapped(name):
                 continue  # reported as missing after the assembly
             raise DataError(
                 f"{source}: channel {name!r}: mapped column {ref.column!r} not found "
                 f"(columns: {', '.join(raw)})"
             )
-        col = raw[ref.column]
+        col = raw[cname]
+        file_units = file_units or bool(col.unit)
         label = source_label(name, ref)
         text_kept = spec.values is not None
         if text_kept:
@@ -214,59 +280,40 @@ def table_read(raw: dict[str, Column], meta: dict, m: ChannelMapping, path: Path
             spec.interpolation == "auto" and (CHANNEL_BY_NAME[name].integer or text_kept)
         )
         series.append(
-            Series(name, source_key(name, k), label, t, values, hold, None, col.locate)
+            Series(name, source_key(name, k), label, t, values, hold, col.unit or None,
+                   col.locate)
         )
+    for name, gate in iter_gates(m):
+        cname = None if gate.column is None else find_column(raw, gate.column)
+        if cname is None:
+            raise DataError(
+                f"{source}: channel {name!r}: valid_if {gate.describe()} not found "
+                f"(columns: {', '.join(raw)})"
+            )
+        col = raw[cname]
+        series.append(Series(name + GATE_SUFFIX, name + GATE_SUFFIX,
+                             f"channel {name!r} (valid_if column {cname!r})", t, col.values,
+                             True, None, col.locate))
     for name, col in raw.items():
         if name.startswith(TRUTH_PREFIX):
             values = parse_numbers(col, f"channel {name!r}", source, m.csv.decimal)
             series.append(Series(name, name, f"channel {name!r}", t, values, False, None,
                                  col.locate))
-    return LogRead(series, fmt, use_file_units=False, table=True, meta=meta)
+    return LogRead(series, fmt, use_file_units=file_units, table=True, meta=meta,
+                   provenance=prov)
 
 
 # ----------------------------------------------------------------------------- CSV
 
 
 def _read_csv(path: Path, opts: CsvOptions) -> Raw:
-    """Leading ``#`` comment lines (one may be ``# parknss_trial {json}``), header, rows."""
-    _nonempty(path)
-    try:
-        lines = path.read_bytes().decode("utf-8-sig").splitlines()
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{path}: not UTF-8 text (binary or corrupt file?)") from exc
-    meta: dict = {}
-    k = 0
-    while k < len(lines) and lines[k].startswith("#"):
-        body = lines[k][1:].strip()
-        if body.startswith(META_KEY):
-            meta = parse_meta(body[len(META_KEY) :], path)
-        k += 1
-    numbered = [(n + 1, ln) for n, ln in enumerate(lines) if n >= k and ln.strip()]
-    if not numbered:
-        raise DataError(f"{path}: no header line (file holds only comments or blank lines)")
-    rows = list(csv.reader([ln for _, ln in numbered], delimiter=opts.delimiter))
-    header = [h.strip() for h in rows[0]]
-    dup = sorted({h for h in header if header.count(h) > 1})
-    if dup or "" in header:
-        what = f"duplicate column {dup[0]!r}" if dup else "an empty column name"
-        raise DataError(f"{path}: line {numbered[0][0]}: header has {what}")
-    if len(rows) < 2:
-        raise DataError(f"{path}: no data rows below the header")
-    for (n, _), row in zip(numbered[1:], rows[1:], strict=True):
-        if len(row) != len(header):
-            last = n == numbered[-1][0]
-            raise DataError(
-                f"{path}: line {n}{' (the last)' if last else ''}: {len(row)} fields, the "
-                f"header has {len(header)} ({'truncated file?' if last else 'malformed row'})"
-            )
-    linenos = [n for n, _ in numbered[1:]]
-    cols = list(zip(*rows[1:], strict=True))
-
-    def locate(i: int) -> str:
-        return f"line {linenos[i]}"
-
-    raw = {h: Column(np.array(c, dtype=object), locate) for h, c in zip(header, cols, strict=True)}
-    return raw, meta
+    """A table CSV (:mod:`parknss.data.csvlog`): its columns (with the file's units) and
+    metadata; the dialect found goes to the provenance under ``csv``."""
+    table = read_csv_table(path, opts)
+    raw = {
+        n: Column(c.values, c.locate, table.units.get(n, "")) for n, c in table.raw.items()
+    }
+    return raw, {**table.meta, CSV_DIALECT: table.dialect}
 
 
 def write_trial_csv(trial: Trial, path: str | Path) -> Path:
@@ -401,12 +448,20 @@ def _read_can(path: Path, m: ChannelMapping) -> LogRead:
             CanRequest(source_key(name, k), name, ref.message, str(ref.signal),
                        source_label(name, ref))
         )
+    for name, gate in iter_gates(m):
+        if gate.message is None:
+            raise DataError(f"{path}: channel {name!r}: valid_if needs 'message' and "
+                            "'signal' in a CAN log")
+        requests.append(CanRequest(name + GATE_SUFFIX, name + GATE_SUFFIX, gate.message,
+                                   str(gate.signal), f"channel {name!r} (valid_if message "
+                                   f"{gate.message!r}, signal {gate.signal!r})"))
     if m.can.dbc is None:
         raise DataError(f"{path}: a CAN log needs a DBC: set can.dbc in the mapping")
     m = resolve_dbc(m, path)
     series, prov = read_can_series(path, requests, m.can)
     fmt = prov.pop("format", path.suffix.lower().lstrip("."))
-    return LogRead(series, fmt, use_file_units=m.can.use_file_units, provenance=prov)
+    return LogRead(series, fmt, use_file_units=m.can.use_file_units, provenance=prov,
+                   unit_required=m.can.use_file_units)
 
 
 def _is_can(path: Path) -> bool:
@@ -842,6 +897,38 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _list_logs(folder: Path) -> tuple[list[Path], list[dict[str, str]]]:
+    """The logs of a folder (sorted), and every other entry with why it is skipped
+    (hidden files are skipped without a word, and so is the manifest)."""
+    logs, skipped = [], []
+    for f in sorted(folder.iterdir()):
+        if f.name.startswith(".") or f.name == MANIFEST:
+            continue
+        why = None
+        if f.is_symlink() and not f.exists():
+            why = "dangling symbolic link"
+        elif f.is_dir():
+            why = "a folder (sub-folders are not read)"
+        elif not f.is_file():
+            why = "not a regular file"
+        elif f.suffix.lower() not in LOG_SUFFIXES:
+            why = f"{f.suffix or 'no suffix'}: not a log type parknss reads"
+        if why is None:
+            logs.append(f)
+        else:
+            skipped.append({"file": f.name, "why": why})
+    return logs, skipped
+
+
+def skipped_summary(campaign: Campaign) -> str | None:
+    """'skipped N files: a (why), b (why)' from an imported campaign's meta, or None."""
+    skipped = campaign.meta.get("skipped_files") or []
+    if not skipped:
+        return None
+    items = ", ".join(f"{s['file']} ({s['why']})" for s in skipped)
+    return f"skipped {len(skipped)} file{'s' * (len(skipped) > 1)}: {items}"
+
+
 def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None = None) -> Campaign:
     """A validated Campaign from a folder of logs, one file per trial.
 
@@ -855,14 +942,7 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
             f"{folder}: log folder not found" if not folder.exists() else f"{folder}: not a folder"
         )
     m = as_mapping(mapping)
-    logs = sorted(
-        f
-        for f in folder.iterdir()
-        if f.is_file()
-        and f.suffix.lower() in LOG_SUFFIXES
-        and f.name != MANIFEST
-        and not f.name.startswith(".")
-    )
+    logs, skipped = _list_logs(folder)
     if (folder / MANIFEST).exists():
         jobs = _read_manifest(folder, logs)
     else:
@@ -906,6 +986,8 @@ def import_folder(src: str | Path, mapping: ChannelMapping | str | Path | None =
         meta["absent_channels"] = m.absent()
     if unlabelled:
         meta["unlabelled_trials"] = unlabelled
+    if skipped:
+        meta["skipped_files"] = skipped
     if m.vehicle.geometry is not None:
         meta["vehicle_geometry"] = VehicleGeometry.from_dict(m.vehicle.geometry).to_dict()
     return Campaign(trials, name=folder.name, meta=meta)
@@ -918,6 +1000,7 @@ __all__ = [
     "read_campaign",
     "read_trial",
     "read_trials",
+    "skipped_summary",
     "write_campaign",
     "write_trial",
     "write_trial_csv",

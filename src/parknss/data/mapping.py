@@ -82,6 +82,15 @@ class SourceRef(StrictModel):
         return f"message {self.message!r}, signal {self.signal!r}"
 
 
+class ValidIf(SourceRef):
+    """A validity signal that gates a channel: a sample of the channel counts only where
+    the gate's last value at or before its time is one of ``equals`` (numbers, or labels
+    of a value table / text). Read from the same kind of source as the channel (a column,
+    or a CAN message and signal), e.g. CANedge ``SpeedValid``, ``ImuValid``."""
+
+    equals: list[float | str] = Field(default_factory=lambda: [1.0], min_length=1)
+
+
 class ChannelSource(StrictModel):
     """Where one schema channel comes from and how its values become schema values.
 
@@ -107,6 +116,8 @@ class ChannelSource(StrictModel):
             integer, enumerated/text and CAN signals; linear otherwise).
         max_gap_s: longest hole between two samples of this channel that is bridged, s
             (None: ``resample.max_gap_s``).
+        valid_if: a validity signal gating the channel (:class:`ValidIf`): samples where
+            it is not valid are invalid samples (``on_invalid`` applies).
         event: the channel is logged on change only (its value holds until the next
             sample, however long): no gap limit, and its last value holds to the end.
             None: the reader's default (true for MDF enumerated and integer channels,
@@ -134,6 +145,7 @@ class ChannelSource(StrictModel):
     interpolation: Interpolation = "auto"
     max_gap_s: float | None = Field(None, gt=0.0)
     event: bool | None = None
+    valid_if: ValidIf | None = None
 
     @model_validator(mode="before")
     @classmethod
@@ -141,6 +153,12 @@ class ChannelSource(StrictModel):
         if isinstance(v, str) and v.strip().lower() == ABSENT:
             return {"absent": True}
         return v
+
+    @property
+    def has_source(self) -> bool:
+        """Whether the spec names where the channel comes from (or that it has none)."""
+        return (any(x is not None for x in (self.column, self.message, self.signal,
+                                            self.sources, self.constant)) or self.absent)
 
     @field_validator("values", mode="before")
     @classmethod
@@ -160,7 +178,7 @@ class ChannelSource(StrictModel):
             )
             if on
         ]
-        if len(kinds) != 1:
+        if len(kinds) > 1 or (not kinds and self.has_source):
             raise ValueError(
                 "give one of: 'column', 'message' and 'signal', 'sources', 'absent: true' or "
                 "'constant'" + (f" (got {' and '.join(kinds)})" if kinds else "")
@@ -224,10 +242,12 @@ class TimeSource(StrictModel):
 
 
 class CsvOptions(StrictModel):
-    """How CSV logs are written: field delimiter and decimal mark."""
+    """How CSV logs are written: field delimiter and decimal mark (sniffed from the file
+    when not given), and whether a units row follows the header (None: detected)."""
 
     delimiter: str = Field(",", min_length=1, max_length=1)
     decimal: str = Field(".", min_length=1, max_length=1)
+    units_row: bool | None = None
 
 
 class VehicleInfo(StrictModel):
@@ -339,6 +359,8 @@ class ChannelMapping(StrictModel):
         src = self.channels.get(name)
         if src is None:
             src = ChannelSource(column=name)
+        elif not src.has_source:  # only how to read it: from a column of its own name
+            src = src.model_copy(update={"column": name})
         if name == "gear" and self.gear_values is not None and src.values is None:
             src = src.model_copy(update={"values": {k: float(v) for k, v in
                                                    self.gear_values.items()}})
@@ -363,6 +385,7 @@ class Column:
 
     values: np.ndarray
     locate: Callable[[int], str]
+    unit: str = ""  # the file's own unit for it (CSV bracket or units row), if any
 
 
 def _check_unit(where: str, name: str, unit: str | None) -> None:
@@ -492,6 +515,18 @@ def iter_sources(m: ChannelMapping) -> Iterator[tuple[str, int, SourceRef, Chann
         src = m.source(name)
         for k, ref in enumerate(src.refs):
             yield name, k, ref, src
+
+
+GATE_SUFFIX = "#valid"  # the series of a channel's valid_if signal: '<channel>#valid'
+
+
+def iter_gates(m: ChannelMapping) -> Iterator[tuple[str, ValidIf]]:
+    """(schema channel, its validity signal) of every gated channel."""
+    for name in CHANNEL_BY_NAME:
+        if name != "t":
+            src = m.source(name)
+            if src.valid_if is not None and not src.absent and src.constant is None:
+                yield name, src.valid_if
 
 
 def source_key(channel: str, k: int) -> str:
