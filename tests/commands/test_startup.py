@@ -68,3 +68,13 @@ def test_importing_the_cli_imports_no_config_machinery():
         "& {'yaml', 'pydantic', 'tqdm', 'numpy'})), file=sys.stderr)"
     )
     assert report == []
+
+
+def test_the_iso_module_imports_no_scipy():
+    # scipy.signal alone took seconds to import; only the low-pass needs it
+    report = _probe(
+        "import json, sys; import parknss.metrics.iso18571; "
+        "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} "
+        "& {'scipy', 'torch', 'matplotlib'})), file=sys.stderr)"
+    )
+    assert report == []
