@@ -78,3 +78,16 @@ def test_the_iso_module_imports_no_scipy():
         "& {'scipy', 'torch', 'matplotlib'})), file=sys.stderr)"
     )
     assert report == []
+
+
+def test_plan_imports_neither_torch_nor_pyplot(tmp_path):
+    # planning needs CasADi and scipy's Dijkstra; the figure needs matplotlib, not pyplot
+    report = _probe(
+        "import json, sys; from parknss.cli import main; "
+        "code = main(['plan', '--scene', '26', '--no-refine', '--json', '--out', sys.argv[1]]); "
+        "print(json.dumps([code, sorted({m for m in sys.modules} & {'torch', "
+        "'matplotlib.pyplot', 'scipy.signal', 'pandas', 'pyarrow', 'fastapi'})]), "
+        "file=sys.stderr)",
+        str(tmp_path / "plan"),
+    )
+    assert report == [0, []]
