@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
+from scipy.linalg import expm
 
 from parknss.config import StrictModel
 
@@ -54,8 +55,6 @@ def discretise(lag_m: float, ds: float) -> tuple[np.ndarray, np.ndarray, np.ndar
     m[2, 2] = -1.0 / lam
     m[2, 3] = 1.0 / lam
     m[1, 4] = -1.0
-    from scipy.linalg import expm  # here: importing scipy.linalg takes ~0.2 s
-
     md = expm(m * ds)
     return md[:3, :3], md[:3, 3], md[:3, 4]
 
