@@ -6,10 +6,14 @@ Replays the longest logged command stream of the default campaign and reports, f
 implementation, the median time per 10 ms step and the real-time factor 10 ms / step:
 
 * ``c_fmu``: the generated C step inside the FMU's binary (``pk_run`` of
-  binaries/linux64/parknss_chain.so over the whole stream, one call);
+  binaries/linux64/parknss_chain.so over the whole stream, one call; portable SSE2 build);
+* ``c_native``: the same C built for this machine (``NativeChain.run``, ``-march=native``,
+  bit-identical results);
 * ``fmi2_dostep``: the same FMU through FMPy's FMI 2.0 ``doStep`` (10 ms), one call a step;
 * ``python_native``: ``DeployedChain.step`` (the Plant protocol) with the generated C
   through ctypes (``engine="native"``);
+* ``python_native_many``: 16 such plants stepped together by ``parknss.chain.deployed.
+  step_many`` (one C call a sample, each NSS layer applied to all 16), time per plant-step;
 * ``python_numpy``: ``DeployedChain.step`` with the NumPy twin (the reference
   implementation, the default engine);
 * ``onnxruntime``: the ONNX step graph (``parknss export onnx``), one session run a step;
@@ -21,6 +25,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
+import os
 import tempfile
 import time
 import zipfile
@@ -106,6 +111,28 @@ def main() -> None:
         slave.terminate()
         slave.freeInstance()
 
+        nat = load_chain(a.chain, engine="native").stepper
+
+        def native_run():
+            nat.start(x0, y0, cm[0])
+            nat.run(cm)
+
+        res["c_native"] = _per_step(native_run, n)
+
+        from parknss.chain.deployed import step_many
+
+        k_many = 16
+        many = [load_chain(a.chain, engine="native") for _ in range(k_many)]
+        m_many = min(n, 500)
+
+        def many_run():
+            for p in many:
+                p.reset()
+            for cmd in cmds[:m_many]:
+                step_many(many, [cmd] * k_many)
+
+        res["python_native_many"] = _per_step(many_run, m_many * k_many, repeats=3)
+
         for engine in ("native", "numpy"):
             dep = load_chain(a.chain, engine=engine)
 
@@ -146,8 +173,10 @@ def main() -> None:
     if a.json:
         print(json.dumps(doc, indent=2))
         return
+    print(f"one run, {n} steps; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     for k, v in res.items():
-        print(f"{k:15s} {v:9.2f} µs/step   {1e4 / v:9.0f}x real time")
+        print(f"{k:19s} {v:9.2f} µs/step   {1e4 / v:9.0f}x real time   "
+              f"{v / res['c_fmu']:6.2f}x the FMU's C step")
     print(f"chain {a.chain}: {doc['specs']}")
 
 

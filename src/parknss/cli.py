@@ -33,6 +33,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=None,  # plain click help: rendering it through rich costs ~0.1 s a call
 )
 
 # Modules in parknss.commands, each with register(app).

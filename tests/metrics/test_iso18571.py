@@ -23,11 +23,13 @@ from parknss.metrics.iso18571 import (
     ISORatingConfig,
     Rating,
     dtw_path_sums,
+    dtw_path_sums_many,
     grade_of,
     lowpass,
     min_samples,
     phase_shift,
     rate,
+    rate_many,
 )
 
 DT = 0.01
@@ -222,6 +224,34 @@ def test_banded_dtw_matches_full_matrix_oracle(n, band):
     x = np.r_[np.zeros(n // 3), np.ones(n // 3), np.zeros(n - 2 * (n // 3))]
     y = np.roll(x, 1)
     assert dtw_path_sums(x, y, band) == pytest.approx(_brute_dtw(x, y, band), rel=1e-12)
+
+
+def test_batched_dtw_is_bit_identical_to_one_pair_at_a_time():
+    # different lengths and bands side by side, plateaus (exact ties) among them
+    rng = np.random.default_rng(11)
+    plateau = np.r_[np.zeros(20), np.ones(25), np.zeros(22)]
+    xs = [rng.standard_normal(50), plateau, rng.standard_normal(9), rng.standard_normal(80)]
+    ys = [rng.standard_normal(50), np.roll(plateau, 2), rng.standard_normal(9),
+          np.roll(xs[3], 3) + 0.1 * rng.standard_normal(80)]
+    bands = [4, 7, 0, 11]
+    nums, dens = dtw_path_sums_many(xs, ys, bands, block=5)
+    for k, (x, y, band) in enumerate(zip(xs, ys, bands, strict=True)):
+        assert (nums[k], dens[k]) == dtw_path_sums(x, y, band)
+        assert (nums[k], dens[k]) == pytest.approx(_brute_dtw(x, y, band), rel=1e-12)
+
+
+def test_rate_many_equals_rate_pair_by_pair():
+    rng = np.random.default_rng(12)
+    pairs = []
+    for n, lag in ((400, 7), (250, -5), (300, 0)):
+        t = _t(n)
+        m = np.sin(2 * np.pi * 0.4 * t) + 0.05 * rng.standard_normal(n)
+        pairs.append((m, 0.9 * np.roll(m, lag)))
+    pairs.append((np.zeros(200), np.zeros(200)))
+    assert rate_many(pairs, DT) == [rate(m, p, DT) for m, p in pairs]
+    assert rate_many([], DT) == []
+    with pytest.raises(DataError, match="second"):
+        rate_many([pairs[0], (np.ones(5), np.ones(5))], DT, labels=["first", "second"])
 
 
 def test_shift_sign_and_pearson_search_match_a_direct_loop():

@@ -18,12 +18,17 @@ The C interface (``pk_chain.h``)::
     void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double cmd0[4]);
     void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]);
     void pk_run(pk_chain *s, const double *cmds, long n, double *out);   n samples
+    void pk_step_many(pk_chain *const *s, long n, const double *cmds, double *out);
+                                                  one sample of n chains, cmds (n, 4)
 
 ``cmd`` is [gear, torque_cmd N·m, decel_cmd m/s², steer_cmd deg]; ``out`` is
 [torque N·m, brake_pressure bar, steer deg, vx m/s, yaw_rate rad/s, ax m/s², ay m/s²,
 engaged gear] (:data:`OUTPUTS`); ``pk_start`` is :meth:`RealtimeChain.start`.
 Matrix-vector products loop over the input outer and the output inner, with the weights
-stored transposed, so the compiler vectorises them without reassociating a sum.
+stored transposed, so the compiler vectorises them without reassociating a sum; blocks of
+outputs are summed in registers. ``pk_step_many`` steps several chains of the same weights
+(a grid's or a vector environment's plants) with each NSS layer applied to all of them
+before the next, so its weights are read once per batch; per chain it is ``pk_step``.
 """
 
 from __future__ import annotations
@@ -240,13 +245,57 @@ _RUNTIME = r"""
 static double pk_sigmoid(double x) { return 1.0 / (1.0 + exp(-x)); }
 
 /* y (n_out) = W x with W stored transposed (n_in, n_out); the sum over the input in
-   order, the output loop inner (vectorised without reassociation). */
+   order, the output loop inner (no sum is reassociated). Blocks of PK_BLK outputs are
+   summed in vector registers (GCC/Clang vector extensions: AVX when the build targets
+   it, else SSE2) over the whole input before they are stored: per output the same
+   additions in the same order as the plain loop, without reloading y for every input. */
+#define PK_BLK 16
+#if defined(__AVX__)
+typedef double pk_vec __attribute__((vector_size(32), aligned(8)));
+#define PK_VW 4
+#else
+typedef double pk_vec __attribute__((vector_size(16), aligned(8)));
+#define PK_VW 2
+#endif
 static void pk_matvec(const double *wt, int n_in, int n_out, const double *x, double *y) {
-    for (int j = 0; j < n_out; ++j) y[j] = 0.0;
+    int j0 = 0;
+    for (; j0 + PK_BLK <= n_out; j0 += PK_BLK) {
+        pk_vec acc[PK_BLK / PK_VW];
+        for (int v = 0; v < PK_BLK / PK_VW; ++v) acc[v] = (pk_vec){0};
+        for (int i = 0; i < n_in; ++i) {
+            const double xi = x[i];
+            const pk_vec *w = (const pk_vec *)(wt + (long)i * n_out + j0);
+            for (int v = 0; v < PK_BLK / PK_VW; ++v) acc[v] += w[v] * xi;
+        }
+        for (int v = 0; v < PK_BLK / PK_VW; ++v) ((pk_vec *)(y + j0))[v] = acc[v];
+    }
+    for (int j = j0; j < n_out; ++j) y[j] = 0.0;
     for (int i = 0; i < n_in; ++i) {
         const double xi = x[i];
         const double *w = wt + (long)i * n_out;
-        for (int j = 0; j < n_out; ++j) y[j] += w[j] * xi;
+        for (int j = j0; j < n_out; ++j) y[j] += w[j] * xi;
+    }
+}
+
+/* The tanh perceptron of nb inputs z (nb, n_z) at once, layer by layer: out (nb, n_o). */
+#define PK_BATCH 16
+static void pk_mlp_many(const pk_layer *L, int n, int nb, const double *z, int n_z,
+                        double *out, int n_o) {
+    double a[PK_BATCH * PK_MAXW], b[PK_BATCH * PK_MAXW];
+    const double *h = z;
+    int hs = n_z;
+    for (int l = 0; l < n; ++l) {
+        int last = l == n - 1, ys = last ? n_o : PK_MAXW;
+        double *y = last ? out : ((l % 2) ? b : a);
+        for (int q = 0; q < nb; ++q) {
+            double *yq = y + q * ys;
+            pk_matvec(L[l].wt, L[l].n_in, L[l].n_out, h + q * hs, yq);
+            for (int j = 0; j < L[l].n_out; ++j) yq[j] += L[l].b[j];
+            if (!last)
+                for (int j = 0; j < L[l].n_out; ++j) yq[j] = tanh(yq[j]);
+        }
+        h = y;
+        hs = ys;
     }
 }
 
@@ -325,6 +374,7 @@ typedef struct {{
 size_t pk_size(void);
 void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double cmd0[4]);
 void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]);
+void pk_step_many(pk_chain *const *s, long n, const double *cmds, double *out);
 void pk_run(pk_chain *s, const double *cmds, long n, double *out);
 #endif
 """
@@ -441,8 +491,14 @@ void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double 
     s->vx_now = x0[0];
 }}
 
-void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
-    double c[3], y[3], u[4], us[4], z[6], h[5], o[2], f[2];
+/* One step in three phases, so that pk_step_many can run the two NSS networks of a
+   batch of chains layer by layer (each layer's weights read once for the batch):
+   pk_pre (commands, gear rule, submodels, envelopes: the networks' inputs), the
+   networks, pk_post (outputs, Euler step, latch). Per chain the arithmetic is pk_step's. */
+typedef struct {{ double y[3], us[4], g, yaw_phys; }} pk_ctx;
+
+static void pk_pre(pk_chain *s, const double cmd[4], pk_ctx *t, double h[5], double z[6]) {{
+    double c[3], u[4], *y = t->y, *us = t->us;
     double request = pk_command(s, cmd[0], cmd + 1, c);
     double vx = s->vx_now, yaw = s->yaw_prev;
     double g = pk_shift(s, request, vx);
@@ -454,18 +510,22 @@ void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
     u[0] = g; u[1] = y[0]; u[2] = y[1]; u[3] = y[2];
     pk_scale_u(u, us);
     if (!s->started) {{ pk_initial(s, us); s->started = 1; }}
-    double yaw_phys, ys = pk_yaw(s->x, us[3], &yaw_phys);
+    double ys = pk_yaw(s->x, us[3], &t->yaw_phys);
     h[0] = s->x[0]; h[1] = ys; h[2] = us[1]; h[3] = us[2]; h[4] = us[3];
-    pk_mlp({out_tab}, {n_out}, h, o);
-    out[0] = y[0]; out[1] = y[1]; out[2] = y[2];
-    out[3] = s->x[0] * ST_SC[0] + ST_OFF[0];
-    out[4] = yaw_phys;
-    out[5] = o[0] * OUT_SC[0] + OUT_OFF[0];
-    out[6] = o[1] * OUT_SC[1] + OUT_OFF[1];
-    out[7] = g;
     z[0] = s->x[0]; z[1] = s->x[1];
     for (int i = 0; i < 4; ++i) z[2 + i] = us[i];
-    pk_mlp({st_tab}, {n_st}, z, f);
+    t->g = g;
+}}
+
+static void pk_post(pk_chain *s, const pk_ctx *t, const double o[2], const double f[2],
+                    double out[PK_NOUT]) {{
+    const double *y = t->y, *us = t->us;
+    out[0] = y[0]; out[1] = y[1]; out[2] = y[2];
+    out[3] = s->x[0] * ST_SC[0] + ST_OFF[0];
+    out[4] = t->yaw_phys;
+    out[5] = o[0] * OUT_SC[0] + OUT_OFF[0];
+    out[6] = o[1] * OUT_SC[1] + OUT_OFF[1];
+    out[7] = t->g;
     s->x[0] = s->x[0] + NSS_DT * f[0];
     s->x[1] = s->x[1] + NSS_DT * f[1];
     if ({shift} && y[1] >= LATCH_BAR && fabs(s->x[0] * ST_SC[0] + ST_OFF[0]) < LATCH_SPEED) {{
@@ -474,6 +534,24 @@ void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
     }}
     s->vx_now = s->x[0] * ST_SC[0] + ST_OFF[0];
     pk_yaw(s->x, us[3], &s->yaw_prev);
+}}
+
+void pk_step_many(pk_chain *const *s, long n, const double *cmds, double *out) {{
+    pk_ctx t[PK_BATCH];
+    double h[PK_BATCH * 5], z[PK_BATCH * 6], o[PK_BATCH * 2], f[PK_BATCH * 2];
+    for (long k0 = 0; k0 < n; k0 += PK_BATCH) {{
+        int nb = (int)(n - k0 < PK_BATCH ? n - k0 : PK_BATCH);
+        for (int q = 0; q < nb; ++q)
+            pk_pre(s[k0 + q], cmds + 4 * (k0 + q), &t[q], h + 5 * q, z + 6 * q);
+        pk_mlp_many({out_tab}, {n_out}, nb, h, 5, o, 2);
+        pk_mlp_many({st_tab}, {n_st}, nb, z, 6, f, 2);
+        for (int q = 0; q < nb; ++q)
+            pk_post(s[k0 + q], &t[q], o + 2 * q, f + 2 * q, out + PK_NOUT * (k0 + q));
+    }}
+}}
+
+void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
+    pk_step_many(&s, 1, cmd, out);
 }}
 
 void pk_run(pk_chain *s, const double *cmds, long n, double *out) {{

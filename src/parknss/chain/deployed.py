@@ -7,6 +7,8 @@ by the NumPy real-time twin (:class:`~parknss.chain.realtime.RealtimeChain`), so
 Beyond the protocol it offers :meth:`DeployedChain.start`, the exact start of a trial
 replay (measured state, actuals and first command), and
 :meth:`DeployedChain.predict_trials`, whole-trial predictions by the batched rollout.
+:func:`step_many` steps several deployed chains one sample together (a vector
+environment's or a grid's plants): native engines of one artefact in one C call.
 :func:`load_chain` / :func:`save_chain` read and write the artefact folder
 (:mod:`parknss.chain.artefact`).
 """
@@ -102,3 +104,22 @@ def predict_chain_campaign(path: str | Path, trials: Iterable[Trial]) -> Predict
     """Whole-trial chain predictions from the logged commands by the artefact at ``path``
     (the chain counterpart of :func:`parknss.nss.predict.predict_campaign`)."""
     return load_chain(path).predict_trials(trials)
+
+
+def step_many(plants: Sequence[DeployedChain], cmds: Sequence[Commands]) -> list[PlantOutput]:
+    """One 10 ms sample of each plant under its command: exactly each plant's own
+    :meth:`DeployedChain.step`. Native-engine chains of one artefact are stepped in one C
+    call (:func:`parknss.chain.native.step_many`, each NSS layer applied to all of them at
+    once); any other set of plants one by one."""
+    plants, cmds = list(plants), list(cmds)
+    if len(plants) != len(cmds):
+        raise ConfigError(f"step_many: {len(plants)} plants, {len(cmds)} commands")
+    native = [p.stepper for p in plants if p.engine == "native"]
+    if not plants or len(native) < len(plants) or len({n.path for n in native}) != 1:
+        return [p.step(c) for p, c in zip(plants, cmds, strict=True)]
+    from parknss.chain.native import step_many as native_step_many
+
+    rows = native_step_many(native, [(c.gear, c.torque_cmd, c.decel_cmd, c.steer_cmd)
+                                     for c in cmds])
+    return [PlantOutput(int(r[7]), r[0], r[1], r[2], r[3], r[4], r[5], r[6])
+            for r in rows.tolist()]

@@ -4,20 +4,28 @@
 (``start``, ``step``, ``gear``, ``dt``) and runs the C of :mod:`parknss.chain.ccode`: the
 same arithmetic as the NumPy twin (the reference implementation, which stays the default
 of :class:`~parknss.chain.deployed.DeployedChain`), equal to it to rounding, several times
-faster. :meth:`NativeChain.run` replays a whole command history in one C call.
+faster. :meth:`NativeChain.run` replays a whole command history in one C call;
+:func:`step_many` steps several chains of one artefact (a vector environment's plants)
+one sample in one C call, each NSS layer applied to all of them at once.
 
 :func:`compile_library` builds a shared library from C files with ``cc`` (``$CC``, else
-gcc, else cc), ``-O3 -std=c99``; the result is cached by the SHA-256 of the sources and
-flags under ``$PARKNSS_CACHE`` (default ``~/.cache/parknss``)/native, written atomically,
-so a chain compiles once per machine. No compiler, or a failing build, is one-line
-:class:`~parknss.errors.ParknssError`.
+gcc, else cc), ``-O3 -std=c99 -march=native`` (this machine's vector instructions; C99
+keeps the compiler from contracting a multiply and an add into one rounding, so the
+result is the portable build's bit for bit; a compiler that refuses the flag gets the
+portable build); the result is cached by the SHA-256 of the sources, the flags and the
+machine's CPU under ``$PARKNSS_CACHE`` (default ``~/.cache/parknss``)/native, written
+atomically, so a chain compiles once per machine. No compiler, or a failing build, is
+one-line :class:`~parknss.errors.ParknssError`. The FMU's binary is built portable
+(:data:`CFLAGS`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import hashlib
 import os
+import platform
 import shutil
 import subprocess
 import tempfile
@@ -30,6 +38,7 @@ from parknss.chain.realtime import RealtimeChain
 from parknss.errors import ParknssError
 
 CFLAGS: tuple[str, ...] = ("-O3", "-std=c99", "-fPIC", "-shared")
+NATIVE_FLAGS: tuple[str, ...] = (*CFLAGS, "-march=native")
 _DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 
 
@@ -70,14 +79,34 @@ def build_shared(files: dict[str, str], out: Path, include: list[Path] | None = 
     return out
 
 
-def compile_library(files: dict[str, str]) -> Path:
+def _machine() -> bytes:
+    """What a ``-march=native`` build depends on: the architecture and the CPU's flags."""
+    flags = ""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith(("flags", "Features")):
+                flags = line
+                break
+    return f"{platform.machine()} {platform.processor()} {flags}".encode()
+
+
+def compile_library(files: dict[str, str], flags: tuple[str, ...] = NATIVE_FLAGS) -> Path:
     """The cached shared library of ``files`` (see the module doc)."""
     h = hashlib.sha256()
     for name in sorted(files):
         h.update(name.encode() + b"\0" + files[name].encode() + b"\0")
-    h.update(" ".join(CFLAGS).encode())
+    h.update(" ".join(flags).encode())
+    if "-march=native" in flags:
+        h.update(_machine())
     lib = cache_dir() / f"pk_{h.hexdigest()[:24]}.so"
-    return lib if lib.is_file() else build_shared(files, lib)
+    if lib.is_file():
+        return lib
+    try:
+        return build_shared(files, lib, flags=flags)
+    except ParknssError:
+        if flags == CFLAGS:
+            raise
+        return compile_library(files, CFLAGS)
 
 
 class NativeChain:
@@ -88,16 +117,21 @@ class NativeChain:
         self.path = compile_library(chain_c_source(rt).files())
         lib = ctypes.CDLL(str(self.path))
         lib.pk_size.restype = ctypes.c_size_t
-        for fn in (lib.pk_start, lib.pk_step, lib.pk_run):
+        for fn in (lib.pk_start, lib.pk_step, lib.pk_run, lib.pk_step_many):
             fn.restype = None
         lib.pk_start.argtypes = [ctypes.c_void_p, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P]
-        lib.pk_step.argtypes = [ctypes.c_void_p, _DOUBLE_P, _DOUBLE_P]
         lib.pk_run.argtypes = [ctypes.c_void_p, _DOUBLE_P, ctypes.c_long, _DOUBLE_P]
+        lib.pk_step_many.argtypes = [ctypes.c_void_p, ctypes.c_long, _DOUBLE_P, _DOUBLE_P]
         self._lib = lib
         self._state = ctypes.create_string_buffer(lib.pk_size())
         self._cmd = (ctypes.c_double * 4)()
         self._out = (ctypes.c_double * len(OUTPUTS))()
-        self._step = lib.pk_step
+        # pk_step through its own handle without argtypes: the pointers are passed as
+        # ready c_void_p, so a call converts nothing
+        self._step = ctypes.CDLL(str(self.path)).pk_step
+        self._step.restype = None
+        self._args = tuple(ctypes.c_void_p(ctypes.addressof(b))
+                           for b in (self._state, self._cmd, self._out))
         self.gear = 0.0
 
     def start(self, x0, y0, cmd0) -> None:
@@ -110,7 +144,7 @@ class NativeChain:
         """One sample: (actuals (3,), (vx, yaw, ax, ay)), as RealtimeChain.step."""
         c = self._cmd
         c[0], c[1], c[2], c[3] = gear, torque_cmd, decel_cmd, steer_cmd
-        self._step(self._state, c, self._out)
+        self._step(*self._args)
         o = self._out[:]
         self.gear = o[7]
         return (o[0], o[1], o[2]), (o[3], o[4], o[5], o[6])
@@ -127,3 +161,25 @@ class NativeChain:
         if len(c):
             self.gear = float(out[-1, 7])
         return out
+
+
+def step_many(chains, cmds) -> np.ndarray:
+    """One 10 ms sample of each of ``chains`` (NativeChains of one artefact: the same
+    compiled library) under ``cmds`` (K, 4) [gear, torque_cmd, decel_cmd, steer_cmd]:
+    (K, 8) rows of :data:`~parknss.chain.ccode.OUTPUTS`, in one C call. Each chain's
+    state advances exactly as by its own :meth:`NativeChain.step`."""
+    chains = list(chains)
+    c = np.ascontiguousarray(cmds, dtype=np.float64)
+    if c.shape != (len(chains), 4):
+        raise ParknssError(f"commands must be ({len(chains)}, 4), got {c.shape}")
+    if not chains:
+        return np.empty((0, len(OUTPUTS)))
+    if len({ch.path for ch in chains}) != 1:
+        raise ParknssError("step_many steps chains of one artefact (one compiled library)")
+    out = np.empty((len(chains), len(OUTPUTS)))
+    states = (ctypes.c_void_p * len(chains))(*(ctypes.addressof(ch._state) for ch in chains))
+    chains[0]._lib.pk_step_many(states, len(chains), c.ctypes.data_as(_DOUBLE_P),
+                                out.ctypes.data_as(_DOUBLE_P))
+    for ch, g in zip(chains, out[:, 7].tolist(), strict=True):
+        ch.gear = g
+    return out

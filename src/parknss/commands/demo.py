@@ -12,8 +12,6 @@ from pathlib import Path
 
 import typer
 
-from parknss.config import SHIPPED_CHAIN, SHIPPED_NSS
-
 
 def _log(msg: str) -> None:
     typer.echo(f"[demo] {msg}", err=True)
@@ -27,8 +25,12 @@ def register(app: typer.Typer) -> None:
             None, "--data", help="Campaign folder (default: the bundled synthetic campaign)."
         ),
         cell: int = typer.Option(26, "--cell", help="Grid cell (0-35) to park in closed loop."),
-        nss: Path = typer.Option(SHIPPED_NSS, "--nss", help="NSS model folder."),
-        chain: Path = typer.Option(SHIPPED_CHAIN, "--chain", help="Chain artefact folder."),
+        nss: Path | None = typer.Option(
+            None, "--nss", help="NSS model folder (default: the shipped one, models/nss)."
+        ),
+        chain: Path | None = typer.Option(
+            None, "--chain", help="Chain artefact folder (default: the shipped models/chain)."
+        ),
         overwrite: bool = typer.Option(
             False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
         ),
@@ -36,8 +38,9 @@ def register(app: typer.Typer) -> None:
         """Describe the campaign, evaluate and rate the shipped plant, park through it."""
         from parknss.experiments.demo import DemoInputs, run_demo, summary_text
 
-        inputs = DemoInputs(out=out, data=data, cell=cell, nss=nss, chain=chain,
-                            overwrite=overwrite)
+        shipped = {"nss": nss, "chain": chain}  # None: DemoInputs' shipped default
+        inputs = DemoInputs(out=out, data=data, cell=cell, overwrite=overwrite,
+                            **{k: v for k, v in shipped.items() if v is not None})
         doc = run_demo(inputs, _log, typer.echo)
         typer.echo(summary_text(doc))
         _log(f"done in {doc['wall_s']} s: artefacts in {out} (summary.json, PNG figures)")

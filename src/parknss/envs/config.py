@@ -26,6 +26,10 @@ class EnvConfig(StrictModel):
     success_goal_reward: float = Field(0.12, gt=0)
     collision_reward: float = -5.0
     chain_path: str | None = Field(None, description="chain artefact (None: the shipped one)")
+    chain_engine: str = Field(
+        "numpy", pattern="^(numpy|native)$",
+        description="the chain plant's step: the NumPy twin or its generated C (native: "
+        "make_vec steps the envs' chains one C call a sample)")
     vehicle_yaml: str | None = Field(
         None, description="vehicle YAML: the car planned, drawn and (reference) driven; "
         "None: the chain's own car (parknss.sim.vehicles.resolve_vehicle)")

@@ -102,7 +102,8 @@ class ParkingEnv(gym.Env):
 
     def _make_plant(self, seed: int | None):
         return make_plant(self.cfg.plant, geom=self.geom, vehicle_yaml=self.cfg.vehicle_yaml,
-                          chain_path=self.cfg.chain_path, seed=seed)
+                          chain_path=self.cfg.chain_path, seed=seed,
+                          chain_engine=self.cfg.chain_engine)
 
     # ---------------------------------------------------------- observation
     def _features(self, x: float, y: float, h: float, v: float) -> np.ndarray:
@@ -158,15 +159,33 @@ class ParkingEnv(gym.Env):
         return self.iface.step(req, self.y)
 
     def step(self, action):
+        a = self.checked_action(action)
+        poses: list = []
+        for _ in range(self.cfg.steps_per_action):
+            self.advance(self.plant.step(self.command(a)), poses)
+        return self.outcome(poses)
+
+    # the step in phases, for ParkingVecEnv (which steps its envs' plants together)
+    def checked_action(self, action) -> np.ndarray:
+        """The action clipped to [-1, 1]; ConfigError for a wrong shape or non-finite."""
         a = np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
         if a.shape != self.action_space.shape or not np.all(np.isfinite(a)):
             raise ConfigError(f"action must be {self.action_space.shape} finite numbers")
-        poses = []
-        for _ in range(self.cfg.steps_per_action):
-            cmd = self._command(a)
-            self.y = self.plant.step(cmd)
-            poses.append(self.integ.step(*self.plant.motion))
-            self.t += self.plant.dt
+        return a
+
+    def command(self, a: np.ndarray) -> Commands:
+        """The plant command of one 10 ms sample under the checked action ``a``."""
+        return self._command(a)
+
+    def advance(self, y, poses: list) -> None:
+        """Take the plant's output ``y`` of one sample: move the pose (appended to
+        ``poses``) and the clock."""
+        self.y = y
+        poses.append(self.integ.step(*self.plant.motion))
+        self.t += self.plant.dt
+
+    def outcome(self, poses: list):
+        """(obs, reward, terminated, truncated, info) after the samples of ``poses``."""
         p = np.asarray(poses)
         hit = bool(np.any(geometry.collides(p, self.geom, self.obstacles, circles=self.circles)))
         out = not bool(np.all(geometry.inside_bounds(p, self.geom, self.scene.bounds)))

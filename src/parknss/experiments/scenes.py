@@ -16,14 +16,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from parknss.outputs import default_run_folder, run_folder, safe_stem
-from parknss.report.plan_figure import draw_plan
-from parknss.report.sim_figures import draw_scene_run
-from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.grid import config_paths
-from parknss.sim.planner import plan_grid, plan_named_scene
 from parknss.sim.scene_formats import load_scene
-from parknss.sim.session import check_plants, simulate_scene
+
+# the figures, the planner and the closed loop are imported by the runs that use them:
+# `parknss plan` starts without matplotlib.pyplot, the tracker or the closed-loop plants
 
 
 def _scene_arg(spec: str) -> str | Path:
@@ -53,6 +51,9 @@ def plan_one(
     identity = {"scene": _scene_arg(spec), "refine": refine,
                 "closed_loop_overrides": closed_loop_overrides, **config_paths(files)}
     with run_folder(folder, command="parknss plan", args=identity, overwrite=overwrite) as run:
+        from parknss.report.plan_figure import draw_plan
+        from parknss.sim.planner import plan_named_scene
+
         scene, plan = plan_named_scene(spec, files, refine=refine,
                                        closed_loop_overrides=closed_loop_overrides)
         geom = files.vehicle_geometry()
@@ -85,6 +86,9 @@ def plan_grid_run(
     """``parknss plan --grid``: plan every cell through the executor
     (:func:`parknss.sim.planner.plan_grid`) and, with ``out``, write
     ``plan_grid_<grid>.json`` there; one plan summary per cell."""
+    from parknss.sim import scenarios as sc
+    from parknss.sim.planner import plan_grid
+
     files = files or SimConfigFiles()
     kwargs = {"files": files, "refine": refine, "closed_loop_overrides": closed_loop_overrides,
               "executor": executor, "workers": workers, "address": address}
@@ -111,6 +115,9 @@ def simulate_one(
     """``parknss simulate``: plan a scene once and drive it under each of ``plants``
     (:func:`parknss.sim.session.simulate_scene`); draw Figs. 8/9 (and, with ``series``,
     write the time-series CSVs) and ``simulate_<scene>.json``; the JSON summary."""
+    from parknss.report.sim_figures import draw_scene_run
+    from parknss.sim.session import check_plants, simulate_scene
+
     files = files or SimConfigFiles()
     check_plants(plants, files.closed_loop_config(), files.vehicle_geometry())  # fail fast
     scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())

@@ -31,10 +31,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from parknss.errors import ConfigError
-from parknss.experiments.results import Table
-from parknss.outputs import run_folder
+
+if TYPE_CHECKING:  # the CLI imports STUDIES: keep this module's import light
+    from parknss.experiments.results import Table
 
 STUDIES = ("learning-curve", "seed-noise", "ablations", "limiter", "convergence")
 
@@ -127,6 +129,7 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
     from parknss.experiments.config import load_experiments_config
     from parknss.experiments.store import open_store
     from parknss.experiments.sweep import Sweep
+    from parknss.outputs import run_folder
     from parknss.report import study_figures as fig
 
     name, quick, out, data = inputs.name, inputs.quick, inputs.out, inputs.data

@@ -44,11 +44,14 @@ Degenerate input is defined, never NaN:
   sub-rating is 1 for an exact match and 0 otherwise.
 
 Implementation: the correlation at every shift comes from prefix sums and one FFT
-cross-correlation; shifts within 1e-7 of the best are re-evaluated exactly (two-pass
-centred Pearson) before the tie rule is applied. The warping runs over anti-diagonals
-of the band, carrying the cost and the path sums of the standard's back-tracked path
-(ties to (i-1, j), then (i, j-1), then (i-1, j-1)) along with it, so memory is linear
-in N and no N x N matrix is formed.
+cross-correlation (NumPy's: SciPy's signal module is imported by the low-pass alone);
+shifts within 1e-7 of the best are re-evaluated exactly (two-pass centred Pearson)
+before the tie rule is applied. The warping runs over anti-diagonals of the band,
+carrying the cost and the path sums of the standard's back-tracked path (ties to
+(i-1, j), then (i, j-1), then (i-1, j-1)) along with it, so memory is linear in N and
+no N x N matrix is formed. :func:`rate_many` rates several pairs (a trial's channels,
+raw and filtered) with one warping sweep over all of them: each pair's arithmetic is
+unchanged, the per-operation overhead of the sweep is shared.
 """
 
 from __future__ import annotations
@@ -59,7 +62,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from pydantic import Field, model_validator
-from scipy import signal as sps
 
 from parknss.config import StrictModel
 from parknss.errors import ConfigError, DataError
@@ -238,7 +240,9 @@ def _approx_correlations(m: np.ndarray, p: np.ndarray, shifts: np.ndarray) -> np
     cb = np.concatenate([[0.0], np.cumsum(b)])
     caa = np.concatenate([[0.0], np.cumsum(a * a)])
     cbb = np.concatenate([[0.0], np.cumsum(b * b)])
-    cross = sps.correlate(a, b, mode="full", method="fft")  # [n-1+k] = Σ a[i+k] b[i]
+    nfft = 1 << (2 * n - 1).bit_length()  # no wrap-around: nfft >= 2n - 1
+    fa, fb = np.fft.rfft(a, nfft), np.fft.rfft(b, nfft)
+    cross = np.fft.irfft(fa * np.conj(fb), nfft)  # [k mod nfft] = Σ a[i+k] b[i]
     k = np.abs(shifts)
     lag = shifts >= 0
     length = (n - k).astype(np.float64)
@@ -249,7 +253,7 @@ def _approx_correlations(m: np.ndarray, p: np.ndarray, shifts: np.ndarray) -> np
     sb = cb[b0 + n - k] - cb[b0]
     saa = caa[a0 + n - k] - caa[a0]
     sbb = cbb[b0 + n - k] - cbb[b0]
-    sab = cross[n - 1 - shifts]
+    sab = cross[(-shifts) % nfft]
     var_a = length * saa - sa * sa
     var_b = length * sbb - sb * sb
     cov = length * sab - sa * sb
@@ -303,82 +307,130 @@ def phase_rating(shift: int, n: int, config=None) -> float:
     return float(((limit - abs(shift)) / limit) ** cfg.phase_exponent)
 
 
-def _diagonal_terms(xw, yw, x0: int, y0: int, u0: int, u1: int):
-    """Data terms of anti-diagonals u0..u1-1 of one parity, shape (u1-u0, width).
+def _diagonal_terms(xw, yw, x0: int, y0: int, u0: int, u1: int, penalty: np.ndarray):
+    """Data terms of anti-diagonals u0..u1-1 of one parity, shape (u1-u0, K·S).
 
-    xw, yw: sliding windows of the padded x and of the reversed padded y. Row r,
-    column c pairs xp[x0 + u + c] with yp[y0 + u - c] (u = u0 + r); returns the local
-    cost (x - y)² and the path-sum increment |x - y| + 1j·|y|.
+    xw, yw: sliding windows (width S) of the padded x and of the reversed padded y, shape
+    (K, windows, S). Row r, pair k, column c (flat index k·S + c) pairs xp[k, x0 + u + c]
+    with yp[k, y0 + u - c] (u = u0 + r); returns the local cost (x - y)² and the path-sum
+    increment |x - y| + 1j·|y|. ``penalty`` (K·S,) is added to the cost: +inf outside
+    the pair's band and in the separator column, else 0.
     """
-    m = yw.shape[0] + yw.shape[1] - 1
-    xs = xw[x0 + u0 : x0 + u1]
-    ys = yw[m - y0 - u1 : m - y0 - u0][::-1]
+    m = yw.shape[1] + yw.shape[2] - 1
+    xs = xw[:, x0 + u0 : x0 + u1].transpose(1, 0, 2)
+    ys = yw[:, m - y0 - u1 : m - y0 - u0][:, ::-1].transpose(1, 0, 2)
+    d = np.empty(xs.shape)
     inc = np.empty(xs.shape, complex)
-    with np.errstate(invalid="ignore"):
-        d = xs - ys
-        np.abs(d, out=inc.real)
-        np.abs(ys, out=inc.imag)
-        return np.square(d, out=d), inc
+    np.subtract(xs, ys, out=d)
+    np.abs(d, out=inc.real)
+    np.abs(ys, out=inc.imag)
+    np.square(d, out=d)
+    d, inc = d.reshape(len(d), -1), inc.reshape(len(d), -1)
+    np.add(d, penalty, out=d)
+    return d, inc
 
 
-def dtw_path_sums(x: np.ndarray, y: np.ndarray, band: int, block: int = 32):
+def dtw_path_sums(x: np.ndarray, y: np.ndarray, band: int, block: int = 12):
     """Banded DTW of x (rows i) against y (columns j), both of length L.
 
     Local cost (x_i - y_j)², steps (1,0), (0,1), (1,1) of weight 1, cells |i - j| <= band.
     Returns (Σ|x_i - y_j|, Σ|y_j|) over the path that back-tracking from (L-1, L-1)
     takes, preferring (i-1, j), then (i, j-1), then (i-1, j-1) on equal cumulative cost.
+    One pair of :func:`dtw_path_sums_many`, which holds the algorithm.
+    """
+    num, den = dtw_path_sums_many([x], [y], [band], block)
+    return float(num[0]), float(den[0])
+
+
+def dtw_path_sums_many(xs, ys, bands, block: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`dtw_path_sums` of K pairs (x_k, y_k, band_k) in one sweep: two arrays (K,).
+
+    The pairs may differ in length L_k and band; each gets exactly the floating-point
+    operations it would get alone, so the results are bit-identical. Batching shares
+    the per-operation overhead of the sweep, which dominates at bands of a few hundred.
 
     Anti-diagonal s = i + j is swept in two parities: even s = 2u holds i = u + e,
     j = u - e; odd s = 2u + 1 holds i = u + e + 1, j = u - e. Each parity keeps one
-    row of cumulative cost and one of path sums (as complex Σ|x-y| + 1j·Σ|y|), with an
-    inf sentinel column each side, so memory is O(L) and no L x L matrix is formed.
-    Out-of-matrix cells see +inf samples and so carry infinite cost.
+    row of cumulative cost and one of path sums (as complex Σ|x-y| + 1j·Σ|y|): the K
+    pairs side by side, S columns each (the widest band's cells and an infinite-cost
+    separator), with an inf sentinel at each end, so memory is O(K L) and no L x L
+    matrix is formed. Cells outside the matrix (x padded with +inf, y with -inf) or
+    outside a pair's own band carry infinite cost.
     """
-    n = x.size
-    if y.size != n or not 0 <= band < n:
-        raise ValueError("dtw_path_sums needs equal lengths and 0 <= band < L")
+    xs = [np.asarray(x, dtype=np.float64) for x in xs]
+    ys = [np.asarray(y, dtype=np.float64) for y in ys]
+    bands = [int(b) for b in bands]
+    if not xs or not len(xs) == len(ys) == len(bands):
+        raise ValueError("dtw_path_sums_many needs one band per pair and at least one pair")
+    for x, y, b in zip(xs, ys, bands, strict=True):
+        if x.ndim != 1 or y.shape != x.shape or not 0 <= b < x.size:
+            raise ValueError("dtw_path_sums needs equal lengths and 0 <= band < L")
+    kk, lengths = len(xs), [x.size for x in xs]
+    n, band = max(lengths), max(bands)
     half, lo_o, hi_o = band // 2, -((band + 1) // 2), (band - 1) // 2
     we, wo = 2 * half + 1, hi_o - lo_o + 1
-    pad = np.full(band + 2, np.inf)
-    xp, yp = np.concatenate([pad, x, pad]), np.concatenate([pad, y, pad])
-    yr, base = yp[::-1].copy(), pad.size
-    ce, co = np.full(we + 2, np.inf), np.full(wo + 2, np.inf)
-    ae, ao = np.zeros(we + 2, complex), np.zeros(wo + 2, complex)
-    xwe, ywe = sliding_window_view(xp, we), sliding_window_view(yr, we)
-    xwo, ywo = sliding_window_view(xp, wo), sliding_window_view(yr, wo)
-    sq, inc = _diagonal_terms(xwe, ywe, base - half, base + half, 0, 1)
-    ce[1 + half], ae[1 + half] = sq[0, half], inc[0, half]  # cell (0, 0)
+    ss, base = max(we, wo) + 1, band + 2  # columns per pair; padding of the signals
+    xp, yp = np.full((kk, n + 2 * base), np.inf), np.full((kk, n + 2 * base), -np.inf)
+    for k, (x, y) in enumerate(zip(xs, ys, strict=True)):
+        xp[k, base : base + x.size], yp[k, base : base + y.size] = x, y
+    yr = yp[:, ::-1].copy()
+    cols, bk = np.arange(ss)[None, :], np.array(bands)[:, None]
+    out_e = np.where((cols >= we) | (2 * np.abs(cols - half) > bk), np.inf, 0.0).ravel()
+    out_o = np.where((cols >= wo) | (np.abs(2 * (cols + lo_o) + 1) > bk), np.inf, 0.0).ravel()
+    width = kk * ss
+    ce, co = np.full(width + 2, np.inf), np.full(width + 2, np.inf)
+    ae, ao = np.zeros(width + 2, complex), np.zeros(width + 2, complex)
+    xw, yw = sliding_window_view(xp, ss, axis=1), sliding_window_view(yr, ss, axis=1)
+    origin = 1 + half + ss * np.arange(kk)  # cell (0, 0) and, at u = L-1, (L-1, L-1)
+    sq, inc = _diagonal_terms(xw, yw, base - half, base + half, 0, 1, out_e)
+    ce[origin], ae[origin] = sq[0, origin - 1], inc[0, origin - 1]
+    ends = np.zeros(kk, complex)
+    stop: dict[int, list[int]] = {}
+    for k, length in enumerate(lengths):
+        stop.setdefault(length - 1, []).append(k)
+    for k in stop.get(0, []):
+        ends[k] = ae[origin[k]]
     # views: the current row of each parity and its predecessors in the other parity
-    c_e, c_o, a_e, a_o = ce[1 : we + 1], co[1 : wo + 1], ae[1 : we + 1], ao[1 : wo + 1]
+    c_e, c_o, a_e, a_o = ce[1 : width + 1], co[1 : width + 1], ae[1 : width + 1], ao[1 : width + 1]
     ke, ko = -half - lo_o, lo_o + half + 1  # offset of 'up' in the other parity's buffer
-    e_up, e_left, ea_up, ea_left = co[ke : ke + we], co[ke + 1 : ke + 1 + we], ao[ke:], ao[ke + 1 :]
-    o_up, o_left, oa_up, oa_left = ce[ko : ko + wo], ce[ko + 1 : ko + 1 + wo], ae[ko:], ae[ko + 1 :]
-    ea_up, ea_left, oa_up, oa_left = ea_up[:we], ea_left[:we], oa_up[:wo], oa_left[:wo]
-    tle, tde, be = np.empty(we, bool), np.empty(we, bool), np.empty(we)
-    tlo, tdo, bo = np.empty(wo, bool), np.empty(wo, bool), np.empty(wo)
-    less, minimum, where, add = np.less, np.minimum, np.where, np.add
+    e_up, e_left = co[ke : ke + width], co[ke + 1 : ke + 1 + width]
+    ea_up, ea_left = ao[ke : ke + width], ao[ke + 1 : ke + 1 + width]
+    o_up, o_left = ce[ko : ko + width], ce[ko + 1 : ko + 1 + width]
+    oa_up, oa_left = ae[ko : ko + width], ae[ko + 1 : ko + 1 + width]
+    tle, nde, be = np.empty(width, bool), np.empty(width, bool), np.empty(width)
+    tlo, ndo, bo = np.empty(width, bool), np.empty(width, bool), np.empty(width)
+    less, less_equal, minimum, add = np.less, np.less_equal, np.minimum, np.add
+    putmask, both = np.putmask, np.logical_and
     with np.errstate(invalid="ignore"):
         for b0 in range(1, n, block):
             b1 = min(n, b0 + block)
-            sq_o, inc_o = _diagonal_terms(xwo, ywo, base + 1 + lo_o, base - lo_o, b0 - 1, b1 - 1)
-            sq_e, inc_e = _diagonal_terms(xwe, ywe, base - half, base + half, b0, b1)
+            sq_o, inc_o = _diagonal_terms(
+                xw, yw, base + 1 + lo_o, base - lo_o, b0 - 1, b1 - 1, out_o
+            )
+            sq_e, inc_e = _diagonal_terms(xw, yw, base - half, base + half, b0, b1, out_e)
             for r in range(b1 - b0):
-                less(o_left, o_up, out=tlo)  # odd diagonal 2u - 1
+                # odd diagonal 2u - 1: from (i-1, j) unless (i, j-1) is strictly cheaper,
+                # from (i-1, j-1) only if strictly cheaper than both
+                less(o_left, o_up, out=tlo)
                 minimum(o_up, o_left, out=bo)
-                less(c_o, bo, out=tdo)
+                less_equal(bo, c_o, out=ndo)
                 minimum(bo, c_o, out=bo)
-                sel = where(tdo, a_o, where(tlo, oa_left, oa_up))
                 add(bo, sq_o[r], out=c_o)
-                add(sel, inc_o[r], out=a_o)
-                less(e_left, e_up, out=tle)  # even diagonal 2u
+                putmask(a_o, ndo, oa_up)
+                putmask(a_o, both(ndo, tlo, out=tlo), oa_left)
+                add(a_o, inc_o[r], out=a_o)
+                # even diagonal 2u, the same rule
+                less(e_left, e_up, out=tle)
                 minimum(e_up, e_left, out=be)
-                less(c_e, be, out=tde)
+                less_equal(be, c_e, out=nde)
                 minimum(be, c_e, out=be)
-                sel = where(tde, a_e, where(tle, ea_left, ea_up))
                 add(be, sq_e[r], out=c_e)
-                add(sel, inc_e[r], out=a_e)
-    end = ae[1 + half]  # cell (L-1, L-1) on the last even diagonal, e = 0
-    return float(end.real), float(end.imag)
+                putmask(a_e, nde, ea_up)
+                putmask(a_e, both(nde, tle, out=tle), ea_left)
+                add(a_e, inc_e[r], out=a_e)
+                for k in stop.get(b0 + r, ()):
+                    ends[k] = ae[origin[k]]  # cell (L-1, L-1): last even diagonal, e = 0
+    return ends.real.copy(), ends.imag.copy()
 
 
 def _ratio(num: float, den: float) -> float:
@@ -397,12 +449,21 @@ def _limited_score(error: float, limit: float, exponent: float, zero_at_limit: b
     return float(((limit - error) / limit) ** exponent)
 
 
+def _dtw_band(length: int, cfg: ISORatingConfig) -> int:
+    """The Sakoe-Chiba band of curves of ``length`` samples: |i - j| < ceil(band·L)."""
+    return max(math.ceil(cfg.dtw_band_fraction * length) - 1, 0)
+
+
+def _magnitude_score(num: float, den: float, cfg: ISORatingConfig) -> float:
+    """EM from the warping path's sums Σ|C_w - T_w| and Σ|T_w|."""
+    return _limited_score(_ratio(num, den), cfg.magnitude_limit, cfg.magnitude_exponent, False)
+
+
 def magnitude_rating(meas_shifted: np.ndarray, pred_shifted: np.ndarray, config=None) -> float:
     """EEARTH magnitude sub-rating EM of the phase-shifted, truncated curves."""
     cfg = config or ISORatingConfig()
-    band = math.ceil(cfg.dtw_band_fraction * meas_shifted.size) - 1
-    num, den = dtw_path_sums(pred_shifted, meas_shifted, max(band, 0))
-    return _limited_score(_ratio(num, den), cfg.magnitude_limit, cfg.magnitude_exponent, False)
+    band = _dtw_band(meas_shifted.size, cfg)
+    return _magnitude_score(*dtw_path_sums(pred_shifted, meas_shifted, band), cfg)
 
 
 def smoothed_derivative(curve: np.ndarray, dt: float, window: int = 9) -> np.ndarray:
@@ -446,21 +507,51 @@ def rate(
     measured, predicted: shape (N,), same unit, on one grid of spacing dt seconds.
     ``label`` names the pair in error messages (e.g. ``"trial r1 channel vx"``).
     """
+    return rate_many([(measured, predicted)], dt, config, [label])[0]
+
+
+def rate_many(
+    pairs,
+    dt: float,
+    config: ISORatingConfig | None = None,
+    labels=None,
+) -> list[Rating]:
+    """The :func:`rate` of each (measured, predicted) pair, all on grids of spacing dt s.
+
+    Every pair is validated and rated exactly as :func:`rate` would (the results are
+    bit-identical); the pairs may differ in length. Their magnitude warpings run in one
+    batched sweep (:func:`dtw_path_sums_many`), which is what makes rating a trial's
+    channels together faster than one by one. ``labels`` name the pairs in error
+    messages (default ``"signal i"``).
+    """
     cfg = config or ISORatingConfig()
-    m, p = _check_pair(measured, predicted, dt, cfg, label)
-    z = corridor_rating(m, p, cfg)
-    shift = phase_shift(m, p, cfg)
-    ep = phase_rating(shift, m.size, cfg)
-    ms, ps = _windows(m, p, shift)
-    em = magnitude_rating(ms, ps, cfg)
-    es = slope_rating(ms, ps, dt, cfg)
-    overall = (
-        cfg.weight_corridor * z
-        + cfg.weight_phase * ep
-        + cfg.weight_magnitude * em
-        + cfg.weight_slope * es
+    pairs = list(pairs)
+    names = list(labels) if labels is not None else [f"signal {i}" for i in range(len(pairs))]
+    if len(names) != len(pairs):
+        raise ValueError("rate_many needs one label per pair")
+    checked = [_check_pair(m, p, dt, cfg, lab) for (m, p), lab in zip(pairs, names, strict=True)]
+    if not checked:
+        return []
+    shifts = [phase_shift(m, p, cfg) for m, p in checked]
+    windows = [_windows(m, p, shift) for (m, p), shift in zip(checked, shifts, strict=True)]
+    nums, dens = dtw_path_sums_many(
+        [ps for _, ps in windows], [ms for ms, _ in windows],
+        [_dtw_band(ms.size, cfg) for ms, _ in windows],
     )
-    return Rating(z, ep, em, es, float(overall), grade_of(overall, cfg), shift)
+    out = []
+    for k, ((m, p), shift, (ms, ps)) in enumerate(zip(checked, shifts, windows, strict=True)):
+        z = corridor_rating(m, p, cfg)
+        ep = phase_rating(shift, m.size, cfg)
+        em = _magnitude_score(float(nums[k]), float(dens[k]), cfg)
+        es = slope_rating(ms, ps, dt, cfg)
+        overall = (
+            cfg.weight_corridor * z
+            + cfg.weight_phase * ep
+            + cfg.weight_magnitude * em
+            + cfg.weight_slope * es
+        )
+        out.append(Rating(z, ep, em, es, float(overall), grade_of(overall, cfg), shift))
+    return out
 
 
 class LowpassConfig(StrictModel):
@@ -485,6 +576,8 @@ def lowpass(signal, dt: float, cutoff_hz: float = 5.0, order: int = 4, label: st
     nyquist = 0.5 / dt
     if not 0 < cutoff_hz < nyquist:
         raise ConfigError(f"low-pass cutoff {cutoff_hz} Hz must lie in (0, {nyquist:g}) Hz")
+    from scipy import signal as sps  # here, not at module level: importing it takes seconds
+
     sos = sps.butter(order, cutoff_hz, btype="low", fs=1.0 / dt, output="sos")
     padlen = 3 * (2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
     if a.size <= padlen:

@@ -26,7 +26,7 @@ from pydantic import Field
 from parknss.config import StrictModel
 from parknss.data.trial import Trial
 from parknss.errors import DataError
-from parknss.metrics.iso18571 import ISORatingConfig, LowpassConfig, grade_of, lowpass, rate
+from parknss.metrics.iso18571 import ISORatingConfig, LowpassConfig, grade_of, lowpass, rate_many
 from parknss.outputs import atomic_file
 from parknss.signals import DT
 
@@ -197,17 +197,33 @@ def rate_pair(
     trial_id: str, channel: str, measured, predicted, dt: float, config: RateConfig
 ) -> list[RatingRow]:
     """Rate one pair raw and filtered; two RatingRows."""
-    label = f"trial {trial_id} channel {channel}"
+    return rate_trial(trial_id, {channel: (measured, predicted)}, dt, config)
+
+
+def rate_trial(
+    trial_id: str, pairs: Mapping[str, tuple], dt: float, config: RateConfig
+) -> list[RatingRow]:
+    """Rate a trial's pairs (channel -> (measured, predicted)) raw and filtered, all in
+    one :func:`~parknss.metrics.iso18571.rate_many` call; per channel a raw then a
+    filtered RatingRow, channels in the order of ``pairs``."""
     lp = config.lowpass
-    m = np.asarray(measured, dtype=np.float64)
-    p = np.asarray(predicted, dtype=np.float64)
-    raw = rate(m, p, dt, config.iso, label=f"{label} (raw)")
-    fm = lowpass(m, dt, lp.cutoff_hz, lp.order, label=f"{label} measured")
-    fp = lowpass(p, dt, lp.cutoff_hz, lp.order, label=f"{label} predicted")
-    filt = rate(fm, fp, dt, config.iso, label=f"{label} (filtered)")
+    rated, labels = [], []
+    for channel, (measured, predicted) in pairs.items():
+        label = f"trial {trial_id} channel {channel}"
+        m = np.asarray(measured, dtype=np.float64)
+        p = np.asarray(predicted, dtype=np.float64)
+        rated.append((m, p))
+        labels.append(f"{label} (raw)")
+        fm = lowpass(m, dt, lp.cutoff_hz, lp.order, label=f"{label} measured")
+        fp = lowpass(p, dt, lp.cutoff_hz, lp.order, label=f"{label} predicted")
+        rated.append((fm, fp))
+        labels.append(f"{label} (filtered)")
+    ratings = rate_many(rated, dt, config.iso, labels)
+    conds = ("raw", "filtered") * len(pairs)
+    channels = [ch for ch in pairs for _ in range(2)]
     return [
-        RatingRow(trial_id, channel, cond, **r.as_dict())
-        for cond, r in (("raw", raw), ("filtered", filt))
+        RatingRow(trial_id, ch, cond, **r.as_dict())
+        for ch, cond, r in zip(channels, conds, ratings, strict=True)
     ]
 
 
@@ -233,8 +249,8 @@ def rate_campaign(
         for ch in cfg.channels:
             if ch not in chans:
                 raise DataError(f"trial {tid}: channel {ch!r} missing from the pairs to rate")
-            meas, pred = chans[ch]
-            rows.extend(rate_pair(str(tid), ch, meas, pred, float(step), cfg))
+        rows.extend(rate_trial(str(tid), {ch: chans[ch] for ch in cfg.channels},
+                               float(step), cfg))
         if progress is not None:
             progress(f"rated {tid}")
     return RatingTable(rows, tuple(cfg.channels), cfg)

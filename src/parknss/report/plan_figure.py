@@ -5,10 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
-from parknss.report.style import save
+from parknss.report.style import figure, save
 from parknss.sim.geometry import footprint
 from parknss.sim.trajectory import Trajectory
 from parknss.vehicle import VehicleGeometry
@@ -28,11 +27,12 @@ def scene_axes(scene, frame: bool = False):
     xmin, ymin, xmax, ymax = scene.bounds
     width = 12.0
     height = max(3.0, min(9.0, width * (ymax - ymin) / max(xmax - xmin, 1e-9)))
-    fig, ax = plt.subplots(figsize=(width, height + 1.0))
+    from matplotlib.patches import Rectangle
+
+    fig = figure((width, height + 1.0))
+    ax = fig.subplots()
     if frame:
-        ax.add_patch(
-            plt.Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8)
-        )
+        ax.add_patch(Rectangle((xmin, ymin), xmax - xmin, ymax - ymin, fill=False, ec="k", lw=0.8))
     for ob in scene.obstacles:
         colour = OBSTACLE_COLOURS.get(ob.kind, "#7f8c8d")
         ax.fill(ob.vertices[:, 0], ob.vertices[:, 1], color=colour, alpha=0.8, lw=0)

@@ -30,6 +30,7 @@ reference's noise-free truth; the chain's and the kinematic plant's own states).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
@@ -221,7 +222,10 @@ class _TruthPlant:
 
     def step(self, cmd: Commands) -> PlantOutput:
         _finite(cmd, f"{self.name} plant")
-        out = self.plant.step(cmd)
+        return self._took(self.plant.step(cmd))
+
+    def _took(self, out: PlantOutput) -> PlantOutput:
+        """Record the wrapped plant's output of one step (the motion); return it."""
         t = self.truth(out)
         self._motion = (0.5 * (self._prev[0] + t.vx), 0.5 * (self._prev[1] + t.yaw_rate))
         self._prev = (t.vx, t.yaw_rate)
@@ -271,12 +275,13 @@ class ChainPlant(_TruthPlant):
 
     name = "chain"
 
-    def __init__(self, path: str | Path | None = None, geom: VehicleGeometry | None = None):
+    def __init__(self, path: str | Path | None = None, geom: VehicleGeometry | None = None,
+                 engine: str = "numpy"):
         from parknss.chain import load_chain
 
         p = Path(path) if path else SHIPPED_CHAIN
         try:
-            chain = load_chain(p)
+            chain = load_chain(p, engine=engine)
         except ParknssError:
             raise
         except (OSError, ValueError, KeyError) as exc:
@@ -297,8 +302,10 @@ def make_plant(
     vehicle_yaml: str | Path | None = None,
     chain_path: str | Path | None = None,
     seed: int | None = None,
+    chain_engine: str = "numpy",
 ) -> SimPlant:
-    """Build a plant by kind: "kinematic", "chain" or "reference"."""
+    """Build a plant by kind: "kinematic", "chain" (stepped by ``chain_engine``: "numpy"
+    or "native", :class:`~parknss.chain.deployed.DeployedChain`) or "reference"."""
     if kind == "kinematic":
         return KinematicPlant(geom)
     if kind == "reference":
@@ -307,7 +314,7 @@ def make_plant(
             check_chain_vehicle(plant.geom, geom, "the reference vehicle")
         return plant
     if kind == "chain":
-        return ChainPlant(chain_path, geom)
+        return ChainPlant(chain_path, geom, chain_engine)
     raise ConfigError(f"unknown plant {kind!r}; one of {', '.join(PLANT_KINDS)}")
 
 
@@ -323,3 +330,18 @@ def parse_plants(spec: str) -> list[str]:
     if not out:
         raise ConfigError("no plant given")
     return out
+
+
+def step_plants(plants: Sequence[SimPlant], cmds: Sequence[Commands]) -> list[PlantOutput]:
+    """One 10 ms sample of each plant under its command, exactly as each plant's own
+    ``step``: chain plants of one artefact on the native engine go in one C call
+    (:func:`parknss.chain.deployed.step_many`), any other set one by one."""
+    plants, cmds = list(plants), list(cmds)
+    if not plants or not all(isinstance(p, ChainPlant) for p in plants):
+        return [p.step(c) for p, c in zip(plants, cmds, strict=True)]
+    from parknss.chain.deployed import step_many
+
+    for p, c in zip(plants, cmds, strict=True):
+        _finite(c, f"{p.name} plant")
+    outs = step_many([p.plant for p in plants], cmds)
+    return [p._took(out) for p, out in zip(plants, outs, strict=True)]
