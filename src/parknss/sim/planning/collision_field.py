@@ -124,8 +124,11 @@ class FieldChecker:
         tolerance: float = 0.01,
         max_step: float = 0.02,
         max_dheading: float = math.radians(0.5),
+        inside_map=None,
     ) -> None:
+        """``inside_map(x, y)``: boolean array, points on the map (default: ``bounds``)."""
         self.geom = geom
+        self.inside_map = inside_map
         self.margin = float(margin)
         self.need = self.margin + float(tolerance)
         self.bounds = tuple(float(b) for b in bounds)
@@ -194,6 +197,8 @@ class FieldChecker:
         wy = p[:, 1:2] + s * corners[None, :, 0] + c * corners[None, :, 1]
         xmin, ymin, xmax, ymax = self.bounds
         inside = np.all((wx >= xmin) & (wx <= xmax) & (wy >= ymin) & (wy <= ymax), axis=1)
+        if self.inside_map is not None:
+            inside &= np.all(self.inside_map(wx, wy), axis=1)
         lb = self._lower_bound(p)
         if lb is None:
             near = np.arange(len(p))

@@ -31,7 +31,11 @@ class HolonomicGrid:
     grid is unreachable for the car.
     """
 
-    def __init__(self, obstacles, bounds, clearance: float, res: float, cap: float) -> None:
+    def __init__(
+        self, obstacles, bounds, clearance: float, res: float, cap: float, edge_distance=None
+    ) -> None:
+        """``edge_distance(x, y)``: signed distance (m) of points to the map's edge, when
+        the map is not (only) ``bounds``."""
         xmin, ymin, xmax, ymax = bounds
         self.res = res
         self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
@@ -42,6 +46,8 @@ class HolonomicGrid:
         d = np.minimum(
             np.minimum(xs - xmin, xmax - xs)[None, :], np.minimum(ys - ymin, ymax - ys)[:, None]
         )
+        if edge_distance is not None:
+            d = np.minimum(d, edge_distance(*np.meshgrid(xs, ys)))
         d = np.minimum(d, cap)  # beyond ``cap`` m only a lower bound is needed
         for poly in obstacles:  # exact distances within ``cap`` of each polygon
             lo, hi = poly.min(axis=0) - cap, poly.max(axis=0) + cap

@@ -56,6 +56,7 @@ from parknss.sim import geometry
 from parknss.sim.geometry import DenseCheckConfig
 from parknss.sim.planning import reeds_shepp as rs
 from parknss.sim.planning.collision_field import FieldChecker
+from parknss.sim.planning.frame import CanonicalScene
 from parknss.sim.planning.holonomic import HolonomicGrid, HolonomicHeuristic
 from parknss.sim.planning.refine_config import RefineConfig
 from parknss.sim.planning.region import check_grid_memory, near_cropped_edge, search_region
@@ -114,6 +115,9 @@ class PlanningConfig(StrictModel):
     )
     time_budget_s: float = Field(
         60.0, gt=0.0, description="wall-clock guard over setup and search, s"
+    )
+    canonical_frame: bool = Field(
+        False, description="search in the goal's frame (frame.py): plans move with the scene"
     )
     region_margin_m: float = Field(
         20.0, gt=0.0, description="search region: start/goal box grown by this (doubles), m"
@@ -285,7 +289,14 @@ class HybridAStar:
         """Plan from ``scene.start`` to ``scene.goal`` (rear-axle poses) around obstacles."""
         t0 = time.perf_counter()
         stats = PlanStats()
-        result = self._plan(scene, stats, t0)
+        result = self._precheck(scene, scene.obstacle_arrays())
+        if result is None:  # search in the canonical frame (frame.py), answer in the world's
+            self._world = scene
+            canon = CanonicalScene.of(scene, self.cfg.canonical_frame)
+            self._canon = canon
+            result = self._plan(canon, stats, t0)
+            if result.trajectory is not None:
+                result.trajectory = canon.frame.to_world_trajectory(result.trajectory)
         result.stats = stats
         stats.time_s = time.perf_counter() - t0
         stats.search_time_s = max(0.0, stats.time_s - stats.setup_time_s - stats.verify_time_s)
@@ -312,9 +323,6 @@ class HybridAStar:
         doubles) while a failed search reached one of its cropped edges."""
         c = self.cfg
         obstacles = scene.obstacle_arrays()
-        early = self._precheck(scene, obstacles)
-        if early is not None:
-            return early
         bounds = tuple(float(v) for v in scene.bounds)
         # obstacles farther than this from the region cannot change any grid value
         g = self.geom
@@ -361,11 +369,11 @@ class HybridAStar:
             tolerance=c.field_tolerance_m,
             max_step=c.dense.max_step_m,
             max_dheading=math.radians(c.dense.max_dheading_deg),
+            inside_map=scene.inside_map,
         )
         if time.perf_counter() > deadline:
             return self._out_of_time(stats, t0, "building the collision field")
         self._checker = checker
-        self._scene = scene
         self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
         self._lip_max = float(self._lips.max())
         clr = checker.clearance(np.array([start, goal]))
@@ -379,7 +387,9 @@ class HybridAStar:
         need = 0.5 * self.geom.width + c.safety_margin_m
         sweep = self._lip_max * c.primitive_length_m
         cap = max(need, checker.reach + sweep + checker.need) + 1.0
-        grid = HolonomicGrid(obstacles, region, need, c.holonomic_resolution_m, cap)
+        grid = HolonomicGrid(
+            obstacles, region, need, c.holonomic_resolution_m, cap, scene.map_edge_distance
+        )
         checker.set_broad_phase(grid.dist_obstacle, grid.x0, grid.y0, grid.res)
         if time.perf_counter() > deadline:
             return self._out_of_time(stats, t0, "building the heuristic grid")
@@ -663,7 +673,8 @@ class HybridAStar:
 
     def _verify(self, traj: Trajectory) -> tuple[bool, float]:
         """Exact dense check of a trajectory: (on the map and clearance >= margin, min m)."""
-        return verify_trajectory(traj, self._scene, self.geom, self.cfg)
+        world = self._canon.frame.to_world_trajectory(traj)
+        return verify_trajectory(world, self._world, self.geom, self.cfg)
 
 
 def verify_trajectory(traj: Trajectory, scene, geom: VehicleGeometry, cfg: PlanningConfig):
