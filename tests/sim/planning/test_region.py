@@ -84,3 +84,20 @@ def test_the_region_grows_when_the_way_leads_outside_it():
     assert res.found, (res.reason, res.detail)
     assert res.trajectory.poses()[:, 1].max() > 6.0  # through the gap
     assert verify_trajectory(res.trajectory, scene, G, cfg)[0]
+
+
+def test_an_unreachable_goal_on_a_huge_map_is_a_reason_not_an_error():
+    # the goal boxed in: the region grows to the memory limit, then the search answers
+    box = [
+        Obstacle("wall", np.array(v, dtype=float))
+        for v in (
+            [[4.0, -4.0], [12.0, -4.0], [12.0, -3.5], [4.0, -3.5]],
+            [[4.0, 3.5], [12.0, 3.5], [12.0, 4.0], [4.0, 4.0]],
+            [[3.5, -4.0], [4.0, -4.0], [4.0, 4.0], [3.5, 4.0]],
+            [[12.0, -4.0], [12.5, -4.0], [12.5, 4.0], [12.0, 4.0]],
+        )
+    ]
+    scene = Scene((-1e6, -1e6, 1e6, 1e6), tuple(box), (-8.0, 0.0, 0.0), (7.0, 0.0, 0.0))
+    res = HybridAStar(CFG, G).plan(scene)
+    assert not res.found and res.reason == "goal unreachable"
+    assert "max_grid_memory_mb" in res.detail

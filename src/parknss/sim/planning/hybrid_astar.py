@@ -59,7 +59,12 @@ from parknss.sim.planning.collision_field import FieldChecker
 from parknss.sim.planning.frame import CanonicalScene
 from parknss.sim.planning.holonomic import HolonomicGrid, HolonomicHeuristic
 from parknss.sim.planning.refine_config import RefineConfig
-from parknss.sim.planning.region import check_grid_memory, near_cropped_edge, search_region
+from parknss.sim.planning.region import (
+    GridMemoryError,
+    check_grid_memory,
+    near_cropped_edge,
+    search_region,
+)
 from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry, min_turning_radius, steer_for_curvature
 
@@ -328,11 +333,18 @@ class HybridAStar:
         g = self.geom
         near = 3.0 * (math.hypot(g.length, g.width) + c.primitive_length_m) + 2.0
         margin, since = c.region_margin_m, t0
+        result = None
         while True:
             region = search_region(scene, margin)
-            check_grid_memory(
-                region, c.field_resolution_m, c.holonomic_resolution_m, c.max_grid_memory_mb
-            )
+            try:
+                check_grid_memory(
+                    region, c.field_resolution_m, c.holonomic_resolution_m, c.max_grid_memory_mb
+                )
+            except GridMemoryError:
+                if result is None:
+                    raise
+                result.detail += "; a larger search region would pass max_grid_memory_mb"
+                return result
             local = [
                 o
                 for o in obstacles
