@@ -129,3 +129,49 @@ def test_load_scene_takes_every_kind_of_scene_spec(tmp_path):
     small = VehicleGeometry(length=4.5, width=1.8, rear_overhang=0.9, wheelbase=2.7)
     big_slot = load_scene("0").meta.slot_size_m
     assert load_scene("0", geom=small).meta.slot_size_m == pytest.approx(big_slot * 4.5 / 4.95)
+
+
+_CR = """<commonRoad benchmarkID="ZAM_Hand-1_1_T-1">
+  <lanelet id="7">
+    <leftBound><point><x>0</x><y>13</y></point><point><x>20</x><y>13</y></point></leftBound>
+    <rightBound><point><x>0</x><y>10</y></point><point><x>20</x><y>10</y></point></rightBound>
+  </lanelet>
+  <planningProblem id="1">
+    <initialState><position><point><x>2</x><y>5</y></point></position>
+      <orientation><exact>0</exact></orientation></initialState>
+    <goalState><position><polygon>
+      <point><x>10</x><y>0</y></point><point><x>14</x><y>0</y></point>
+      <point><x>14</x><y>1</y></point><point><x>11</x><y>1</y></point>
+      <point><x>11</x><y>3</y></point><point><x>10</x><y>3</y></point>
+      <point><x>10</x><y>0</y></point></polygon></position>
+      <orientation><exact>0.5</exact></orientation></goalState>
+  </planningProblem>
+  <planningProblem id="2">
+    <initialState><position><point><x>2</x><y>5</y></point></position>
+      <orientation><exact>0</exact></orientation></initialState>
+    <goalState><position><lanelet ref="7"/></position></goalState>
+  </planningProblem>
+</commonRoad>"""
+
+
+def test_commonroad_goals_by_area_centroid_lanelet_and_problem(tmp_path):
+    """A closed L-shaped polygon goal (first point repeated; area 4 + 2 m², centroid
+    ((4·12 + 2·10.5) / 6, (4·0.5 + 2·2) / 6) = (11.5, 1.0), where the vertex mean is
+    (11.43, 1.14)); planning problem 2 with a lanelet goal: the 20 m x 3 m lane's centroid
+    (10, 11.5), heading along its centre line (0 rad)."""
+    path = tmp_path / "hand.xml"
+    path.write_text(_CR)
+    geom = VehicleGeometry()
+    back = 0.5 * geom.length - geom.rear_overhang  # goal is the car's centre; scene: rear axle
+    one = read_commonroad(path, geom)
+    gx, gy, gth = one.goal
+    assert gth == pytest.approx(0.5)
+    assert gx + back * math.cos(0.5) == pytest.approx(11.5, abs=1e-9)
+    assert gy + back * math.sin(0.5) == pytest.approx(1.0, abs=1e-9)
+    two = load_scene(f"{path}#2", None, geom)
+    assert two.goal[2] == pytest.approx(0.0, abs=1e-12)
+    assert two.goal[0] + back == pytest.approx(10.0, abs=1e-9)
+    assert two.goal[1] == pytest.approx(11.5, abs=1e-9)
+    assert two.start == one.start
+    with pytest.raises(PlanningError, match=r"no planning problem '3' \(the file has: 1, 2\)"):
+        read_commonroad(path, geom, problem_id="3")

@@ -34,6 +34,9 @@ def register(app: typer.Typer) -> None:
         scene: str | None = typer.Option(
             None, "--scene", help="Scene JSON, TPCAP .csv, CommonRoad .xml, cell 0-35, robust:N."
         ),
+        problem: str | None = typer.Option(
+            None, "--problem", help="CommonRoad planning problem id (unknown id: lists them)."
+        ),
         grid: str | None = typer.Option(
             None, "--grid", help="Plan a whole grid: 36 (default grid), 12 (core), 252."
         ),
@@ -70,6 +73,10 @@ def register(app: typer.Typer) -> None:
         overrides = NO_RESERVE if no_reserve else None
         settings = {"refine": not no_refine, "closed_loop_overrides": overrides,
                     "out": out, "overwrite": overwrite}
+        if problem is not None:
+            if scene is None or not scene.lower().endswith(".xml"):
+                raise PlanningError("--problem needs --scene FILE.xml (a CommonRoad file)")
+            scene = f"{scene}#{problem}"
         if scene is not None:
             from parknss.experiments.scenes import plan_one
 

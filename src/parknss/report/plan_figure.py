@@ -21,6 +21,12 @@ def outline(ax, poly: np.ndarray, **kw) -> None:
     ax.plot(closed[:, 0], closed[:, 1], **kw)
 
 
+ZOOM_ABOVE_M = 100.0
+"""Maps larger than this (m, either side) are drawn zoomed to the plan, start and goal."""
+ZOOM_PAD_M = 10.0
+"""...with this border around them, m."""
+
+
 def scene_axes(scene, frame: bool = False):
     """(fig, ax) of a 12 in wide figure of ``scene`` with its obstacles filled (and the
     map rectangle outlined when ``frame``)."""
@@ -41,11 +47,17 @@ def scene_axes(scene, frame: bool = False):
 
 def finish_scene(fig, ax, scene, geom: VehicleGeometry, title: str, path, lw: float) -> Path:
     """Outline the start (solid) and goal (dotted) footprints with line width ``lw``, fit
-    the map with a 0.5 m border, label, add the legend and save the PNG at ``path``."""
+    the map with a 0.5 m border (a map beyond :data:`ZOOM_ABOVE_M`: the drawn lines, plan
+    start and goal, with :data:`ZOOM_PAD_M`), label, add the legend and save the PNG."""
     xmin, ymin, xmax, ymax = scene.bounds
     outline(ax, footprint(scene.start, geom), color="#2471a3", lw=lw, label="start")
     outline(ax, footprint(scene.goal, geom), color="#1e8449", lw=lw, ls=":", label="goal")
     ax.set_aspect("equal")
+    if max(xmax - xmin, ymax - ymin) > ZOOM_ABOVE_M:  # a large map: the problem's region
+        pts = np.concatenate([ln.get_xydata() for ln in ax.get_lines()])
+        lo, hi = pts.min(axis=0) - ZOOM_PAD_M, pts.max(axis=0) + ZOOM_PAD_M
+        xmin, ymin = max(xmin, lo[0]), max(ymin, lo[1])
+        xmax, ymax = min(xmax, hi[0]), min(ymax, hi[1])
     ax.set_xlim(xmin - 0.5, xmax + 0.5)
     ax.set_ylim(ymin - 0.5, ymax + 0.5)
     ax.set_xlabel("x [m]")

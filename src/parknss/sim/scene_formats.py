@@ -179,20 +179,84 @@ def _shapes(shape_el, where: str, cfg: SceneImportConfig) -> list[np.ndarray]:
     return out
 
 
-def _state_pose(state, where: str) -> tuple[np.ndarray, float]:
+def area_centre(shapes: list[np.ndarray]) -> np.ndarray:
+    """(2,) area centroid (m) of the union of disjoint shapes (M, 2), each an open or closed
+    polygon (a repeated first point is dropped); shapes without area (points, segments)
+    count by their vertex mean only when no shape has area."""
+    cents, areas = [], []
+    for poly in shapes:
+        q = np.asarray(poly, dtype=float)
+        if len(q) > 1 and np.array_equal(q[0], q[-1]):
+            q = q[:-1]
+        x, y = q[:, 0] - q[0, 0], q[:, 1] - q[0, 1]  # about the first vertex: no cancellation
+        xn, yn = np.roll(x, -1), np.roll(y, -1)
+        cross = x * yn - xn * y
+        a = 0.5 * float(cross.sum())
+        if len(q) >= 3 and abs(a) > 1e-12:
+            c = np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6.0 * a)
+            cents.append(c + q[0])
+            areas.append(abs(a))
+    if not areas:
+        return np.concatenate(shapes).mean(axis=0)
+    w = np.array(areas)
+    return (np.array(cents) * w[:, None]).sum(axis=0) / w.sum()
+
+
+def _lanelets(root, where: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Lanelet id -> (left bound (N, 2), right bound (M, 2)), m."""
+    out = {}
+    for ll in root.findall("lanelet"):
+        w = f"{where}: lanelet {ll.get('id')}"
+        sides = [ll.find(side) for side in ("leftBound", "rightBound")]
+        if any(b is None for b in sides):
+            continue
+        left, right = (np.array([_point(pt, w) for pt in b.findall("point")]) for b in sides)
+        if len(left) >= 2 and len(right) >= 2:
+            out[str(ll.get("id"))] = (left, right)
+    return out
+
+
+def _lanelet_pose(refs, lanelets, where: str) -> tuple[np.ndarray, float | None]:
+    """The area centroid of the referenced lanelets (m) and the heading (rad) of the
+    first one's centre line at its segment nearest to that centroid."""
+    polys = []
+    for ref in refs:
+        if ref not in lanelets:
+            raise PlanningError(f"{where}: goal lanelet {ref!r} is not in the file")
+        left, right = lanelets[ref]
+        polys.append(np.concatenate([right, left[::-1]]))
+    xy = area_centre(polys)
+    left, right = lanelets[refs[0]]
+    n = min(len(left), len(right))
+    centre = 0.5 * (left[:n] + right[:n]) if len(left) == len(right) else np.array(
+        [left[0] + right[0], left[-1] + right[-1]]
+    ) / 2
+    mids = 0.5 * (centre[1:] + centre[:-1])
+    k = int(np.argmin(np.hypot(*(mids - xy).T)))
+    d = centre[k + 1] - centre[k]
+    return xy, math.atan2(d[1], d[0])
+
+
+def _state_pose(state, where: str, lanelets=None) -> tuple[np.ndarray, float]:
     pos = state.find("position")
     if pos is None:
         raise PlanningError(f"{where}: state without <position>")
     pt = pos.find("point")
+    refs = [str(el.get("ref")) for el in pos.findall("lanelet")]
+    heading = None
     if pt is not None:
         xy = _point(pt, where)
+    elif refs and lanelets is not None:
+        xy, heading = _lanelet_pose(refs, lanelets, where)
     else:
         shapes = _shapes(pos, where, SceneImportConfig())
         if not shapes:
             raise PlanningError(f"{where}: position without a point or shape")
-        xy = np.concatenate(shapes).mean(axis=0)
+        xy = area_centre(shapes)
     ori = state.find("orientation")
-    return xy, (_value(ori, where) if ori is not None else 0.0)
+    if ori is not None:
+        return xy, _value(ori, where)
+    return xy, heading if heading is not None else 0.0
 
 
 def read_commonroad(
@@ -200,9 +264,11 @@ def read_commonroad(
     geom: VehicleGeometry | None = None,
     cfg: SceneImportConfig | None = None,
     ocfg: ObstacleInputConfig | None = None,
+    problem_id: str | None = None,
 ) -> Scene:
     """The scene of a CommonRoad XML scenario (module docstring); named after its
-    ``benchmarkID`` (else the file stem)."""
+    ``benchmarkID`` (else the file stem). ``problem_id``: the ``planningProblem`` to plan
+    (default the first; an unknown id is refused with the list of the file's ids)."""
     from lxml import etree
 
     cfg, ocfg = cfg or SceneImportConfig(), ocfg or ObstacleInputConfig()
@@ -237,9 +303,16 @@ def read_commonroad(
                     w = f"{p}: lanelet {ll.get('id')} {side}"
                     pts = np.array([_point(pt, w) for pt in bound.findall("point")])
                     drawn.append(("lanelet bound", pts, "polyline"))
-    problem = root.find("planningProblem")
-    if problem is None:
+    problems = root.findall("planningProblem")
+    if not problems:
         raise PlanningError(f"{p}: no <planningProblem>")
+    problem = problems[0]
+    if problem_id is not None:
+        chosen = [q for q in problems if q.get("id") == str(problem_id)]
+        if not chosen:
+            ids = ", ".join(str(q.get("id")) for q in problems)
+            raise PlanningError(f"{p}: no planning problem {problem_id!r} (the file has: {ids})")
+        problem = chosen[0]
     where = f"{p}: planningProblem {problem.get('id')}"
     init, goal_el = problem.find("initialState"), problem.find("goalState")
     if init is None or goal_el is None:
@@ -249,7 +322,9 @@ def read_commonroad(
     def rear_axle(xy, th):
         return np.array([xy[0] - back * math.cos(th), xy[1] - back * math.sin(th), th])
 
-    start, goal = rear_axle(*_state_pose(init, where)), rear_axle(*_state_pose(goal_el, where))
+    lanes = _lanelets(root, str(p))
+    start = rear_axle(*_state_pose(init, where))
+    goal = rear_axle(*_state_pose(goal_el, where, lanes))
     pts = [start[None, :2], goal[None, :2], *[v for _, v, _ in drawn]]
     allp = np.concatenate(pts)
     m = cfg.commonroad_map_margin_m + geom.length
@@ -262,11 +337,15 @@ def read_commonroad(
 def load_scene(
     spec: str, cfg: ScenariosConfig | None = None, geom: VehicleGeometry | None = None
 ) -> Scene:
-    """A Scene from any ``--scene`` value: a TPCAP case ``.csv``, a CommonRoad ``.xml``, a
-    scene JSON file, a grid cell 0-35 or ``robust:N`` (:func:`~parknss.sim.scenarios.
-    resolve_scene`); grid scenes and CommonRoad poses for the car ``geom``."""
+    """A Scene from any ``--scene`` value: a TPCAP case ``.csv``, a CommonRoad ``.xml``
+    (``FILE.xml#ID``: its planning problem ID), a scene JSON file, a grid cell 0-35 or
+    ``robust:N`` (:func:`~parknss.sim.scenarios.resolve_scene`); grid scenes and
+    CommonRoad poses for the car ``geom``."""
     cfg = cfg if cfg is not None else load_scenarios_config()
     text = spec.strip()
+    path, _, problem = text.rpartition("#") if "#" in text else (text, "", None)
+    if Path(path).suffix.lower() == ".xml":  # FILE.xml#ID: planning problem ID
+        return read_commonroad(path, geom, cfg.imports, cfg.obstacles, problem or None)
     if Path(text).suffix.lower() in (".csv", ".xml"):
         return read_scene_file(text, cfg.obstacles, cfg.imports, geom)
     return resolve_scene(text, cfg, geom)

@@ -35,6 +35,9 @@ import numpy as np
 from parknss.sim.geometry import body_corners, densify_pairs, point_distance
 from parknss.vehicle import VehicleGeometry
 
+CHUNK_POINTS = 1 << 18
+"""Grid nodes per exact-distance batch (bounds the temporaries of one polygon)."""
+
 
 class DistanceField:
     """Exact distance (m) to the nearest obstacle at grid nodes, capped at ``cap``.
@@ -66,11 +69,14 @@ class DistanceField:
             if i1 < i0 or j1 < j0:
                 continue
             xs = self.x0 + resolution * np.arange(i0, i1 + 1)
-            ys = self.y0 + resolution * np.arange(j0, j1 + 1)
-            gx, gy = np.meshgrid(xs, ys)
-            d = point_distance(np.column_stack([gx.ravel(), gy.ravel()]), poly)
-            block = self.values[j0 : j1 + 1, i0 : i1 + 1]
-            np.minimum(block, d.reshape(gx.shape), out=block)
+            rows = max(1, CHUNK_POINTS // len(xs))  # bounded temporaries for big polygons
+            for ja in range(j0, j1 + 1, rows):
+                jb = min(j1 + 1, ja + rows)
+                ys = self.y0 + resolution * np.arange(ja, jb)
+                gx, gy = np.meshgrid(xs, ys)
+                d = point_distance(np.column_stack([gx.ravel(), gy.ravel()]), poly)
+                block = self.values[ja:jb, i0 : i1 + 1]
+                np.minimum(block, d.reshape(gx.shape), out=block)
 
     def __call__(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Bilinear interpolation at points (any shape), m; clamped at the grid edge."""
@@ -118,8 +124,11 @@ class FieldChecker:
         tolerance: float = 0.01,
         max_step: float = 0.02,
         max_dheading: float = math.radians(0.5),
+        inside_map=None,
     ) -> None:
+        """``inside_map(x, y)``: boolean array, points on the map (default: ``bounds``)."""
         self.geom = geom
+        self.inside_map = inside_map
         self.margin = float(margin)
         self.need = self.margin + float(tolerance)
         self.bounds = tuple(float(b) for b in bounds)
@@ -188,6 +197,8 @@ class FieldChecker:
         wy = p[:, 1:2] + s * corners[None, :, 0] + c * corners[None, :, 1]
         xmin, ymin, xmax, ymax = self.bounds
         inside = np.all((wx >= xmin) & (wx <= xmax) & (wy >= ymin) & (wy <= ymax), axis=1)
+        if self.inside_map is not None:
+            inside &= np.all(self.inside_map(wx, wy), axis=1)
         lb = self._lower_bound(p)
         if lb is None:
             near = np.arange(len(p))

@@ -18,6 +18,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from parknss.sim.geometry import point_distance
+from parknss.sim.planning.collision_field import CHUNK_POINTS
 
 
 class HolonomicGrid:
@@ -30,7 +31,11 @@ class HolonomicGrid:
     grid is unreachable for the car.
     """
 
-    def __init__(self, obstacles, bounds, clearance: float, res: float, cap: float) -> None:
+    def __init__(
+        self, obstacles, bounds, clearance: float, res: float, cap: float, edge_distance=None
+    ) -> None:
+        """``edge_distance(x, y)``: signed distance (m) of points to the map's edge, when
+        the map is not (only) ``bounds``."""
         xmin, ymin, xmax, ymax = bounds
         self.res = res
         self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
@@ -41,6 +46,8 @@ class HolonomicGrid:
         d = np.minimum(
             np.minimum(xs - xmin, xmax - xs)[None, :], np.minimum(ys - ymin, ymax - ys)[:, None]
         )
+        if edge_distance is not None:
+            d = np.minimum(d, edge_distance(*np.meshgrid(xs, ys)))
         d = np.minimum(d, cap)  # beyond ``cap`` m only a lower bound is needed
         for poly in obstacles:  # exact distances within ``cap`` of each polygon
             lo, hi = poly.min(axis=0) - cap, poly.max(axis=0) + cap
@@ -48,10 +55,13 @@ class HolonomicGrid:
             j0, j1 = np.searchsorted(ys, lo[1]), np.searchsorted(ys, hi[1], side="right")
             if i1 <= i0 or j1 <= j0:
                 continue
-            gx, gy = np.meshgrid(xs[i0:i1], ys[j0:j1])
-            dp = point_distance(np.column_stack([gx.ravel(), gy.ravel()]), poly)
-            block = d[j0:j1, i0:i1]
-            np.minimum(block, dp.reshape(block.shape), out=block)
+            rows = max(1, CHUNK_POINTS // (i1 - i0))  # bounded temporaries
+            for ja in range(j0, j1, rows):
+                jb = min(j1, ja + rows)
+                gx, gy = np.meshgrid(xs[i0:i1], ys[ja:jb])
+                dp = point_distance(np.column_stack([gx.ravel(), gy.ravel()]), poly)
+                block = d[ja:jb, i0:i1]
+                np.minimum(block, dp.reshape(block.shape), out=block)
         self.dist_obstacle = d
         self.free = self.dist_obstacle >= clearance - res / math.sqrt(2.0)
         self._graph = None

@@ -56,8 +56,15 @@ from parknss.sim import geometry
 from parknss.sim.geometry import DenseCheckConfig
 from parknss.sim.planning import reeds_shepp as rs
 from parknss.sim.planning.collision_field import FieldChecker
+from parknss.sim.planning.frame import CanonicalScene
 from parknss.sim.planning.holonomic import HolonomicGrid, HolonomicHeuristic
 from parknss.sim.planning.refine_config import RefineConfig
+from parknss.sim.planning.region import (
+    GridMemoryError,
+    check_grid_memory,
+    near_cropped_edge,
+    search_region,
+)
 from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry, min_turning_radius, steer_for_curvature
 
@@ -113,6 +120,15 @@ class PlanningConfig(StrictModel):
     )
     time_budget_s: float = Field(
         60.0, gt=0.0, description="wall-clock guard over setup and search, s"
+    )
+    canonical_frame: bool = Field(
+        False, description="search in the goal's frame (frame.py): plans move with the scene"
+    )
+    region_margin_m: float = Field(
+        20.0, gt=0.0, description="search region: start/goal box grown by this (doubles), m"
+    )
+    max_grid_memory_mb: float = Field(
+        800.0, gt=0.0, description="refuse a search region whose grids need more, MiB"
     )
     dense: DenseCheckConfig = DenseCheckConfig()
     refine: RefineConfig = RefineConfig()
@@ -278,7 +294,14 @@ class HybridAStar:
         """Plan from ``scene.start`` to ``scene.goal`` (rear-axle poses) around obstacles."""
         t0 = time.perf_counter()
         stats = PlanStats()
-        result = self._plan(scene, stats, t0)
+        result = self._precheck(scene, scene.obstacle_arrays())
+        if result is None:  # search in the canonical frame (frame.py), answer in the world's
+            self._world = scene
+            canon = CanonicalScene.of(scene, self.cfg.canonical_frame)
+            self._canon = canon
+            result = self._plan(canon, stats, t0)
+            if result.trajectory is not None:
+                result.trajectory = canon.frame.to_world_trajectory(result.trajectory)
         result.stats = stats
         stats.time_s = time.perf_counter() - t0
         stats.search_time_s = max(0.0, stats.time_s - stats.setup_time_s - stats.verify_time_s)
@@ -301,34 +324,74 @@ class HybridAStar:
         return None
 
     def _plan(self, scene, stats: PlanStats, t0: float) -> PlanResult:
+        """Search the region around start and goal (:mod:`.region`), growing it (the margin
+        doubles) while a failed search reached one of its cropped edges."""
         c = self.cfg
         obstacles = scene.obstacle_arrays()
+        bounds = tuple(float(v) for v in scene.bounds)
+        # obstacles farther than this from the region cannot change any grid value
+        g = self.geom
+        near = 3.0 * (math.hypot(g.length, g.width) + c.primitive_length_m) + 2.0
+        margin, since = c.region_margin_m, t0
+        result = None
+        while True:
+            region = search_region(scene, margin)
+            try:
+                check_grid_memory(
+                    region, c.field_resolution_m, c.holonomic_resolution_m, c.max_grid_memory_mb
+                )
+            except GridMemoryError:
+                if result is None:
+                    raise
+                result.detail += "; a larger search region would pass max_grid_memory_mb"
+                return result
+            local = [
+                o
+                for o in obstacles
+                if o[:, 0].min() <= region[2] + near
+                and o[:, 0].max() >= region[0] - near
+                and o[:, 1].min() <= region[3] + near
+                and o[:, 1].max() >= region[1] - near
+            ]
+            self._trees = []
+            result = self._plan_region(scene, local, region, stats, t0, since)
+            if result.found or region == bounds or result.reason == "time budget exhausted":
+                return result
+            xy = np.concatenate([t.poses[: len(t.nodes), :2] for t in self._trees] or [[]])
+            reach = 2.0 * math.hypot(g.length, g.width) + c.primitive_length_m
+            blocked = result.reason in ("goal unreachable", "search space exhausted")
+            if not blocked and not near_cropped_edge(xy.reshape(-1, 2), region, bounds, reach):
+                return result
+            margin, since = 2.0 * margin, time.perf_counter()
+
+    def _plan_region(self, scene, obstacles, region, stats, t0: float, since: float):
+        """One search over ``region`` with ``obstacles`` (those near it); ``since``: when
+        this attempt's setup began (s, perf_counter)."""
+        c = self.cfg
         deadline = t0 + c.time_budget_s
-        early = self._precheck(scene, obstacles)
-        if early is not None:
-            return early
+        self._exp0 = stats.expansions
         start = tuple(float(v) for v in scene.start)
         goal = tuple(float(v) for v in scene.goal)
         checker = FieldChecker(
             obstacles,
-            scene.bounds,
+            region,
             self.geom,
             c.safety_margin_m,
             resolution=c.field_resolution_m,
             tolerance=c.field_tolerance_m,
             max_step=c.dense.max_step_m,
             max_dheading=math.radians(c.dense.max_dheading_deg),
+            inside_map=scene.inside_map,
         )
         if time.perf_counter() > deadline:
             return self._out_of_time(stats, t0, "building the collision field")
         self._checker = checker
-        self._scene = scene
         self._lips = np.array([checker.lipschitz(k) for _, k in self.prim_meta])
         self._lip_max = float(self._lips.max())
         clr = checker.clearance(np.array([start, goal]))
         # the direct connection (with lead-ins) first: easy scenes end here
         direct = _Tree(_Node(start, 0.0, -1, 0.0, 0, 0.0, 0.0), goal, None, False)
-        stats.setup_time_s = time.perf_counter() - t0
+        stats.setup_time_s += time.perf_counter() - since
         done = self._connect(direct, 0, None, [0], stats)
         if done is not None:
             return done
@@ -336,7 +399,9 @@ class HybridAStar:
         need = 0.5 * self.geom.width + c.safety_margin_m
         sweep = self._lip_max * c.primitive_length_m
         cap = max(need, checker.reach + sweep + checker.need) + 1.0
-        grid = HolonomicGrid(obstacles, scene.bounds, need, c.holonomic_resolution_m, cap)
+        grid = HolonomicGrid(
+            obstacles, region, need, c.holonomic_resolution_m, cap, scene.map_edge_distance
+        )
         checker.set_broad_phase(grid.dist_obstacle, grid.x0, grid.y0, grid.res)
         if time.perf_counter() > deadline:
             return self._out_of_time(stats, t0, "building the heuristic grid")
@@ -354,6 +419,7 @@ class HybridAStar:
             holo_start = grid.heuristic(start[:2])
             trees.append(_Tree(self._root(goal, clr[1], holo_start), start, holo_start, True))
         stats.setup_time_s += time.perf_counter() - t1
+        self._trees = trees
         return self._search(trees, stats, deadline)
 
     def _out_of_time(self, stats: PlanStats, t0: float, where: str) -> PlanResult:
@@ -372,7 +438,7 @@ class HybridAStar:
         c = self.cfg
         while any(t.heap for t in trees):
             for i, tree in enumerate(trees):
-                if stats.expansions >= c.max_expansions:
+                if stats.expansions - self._exp0 >= c.max_expansions:
                     return PlanResult(
                         False,
                         "expansion budget exhausted",
@@ -619,7 +685,8 @@ class HybridAStar:
 
     def _verify(self, traj: Trajectory) -> tuple[bool, float]:
         """Exact dense check of a trajectory: (on the map and clearance >= margin, min m)."""
-        return verify_trajectory(traj, self._scene, self.geom, self.cfg)
+        world = self._canon.frame.to_world_trajectory(traj)
+        return verify_trajectory(world, self._world, self.geom, self.cfg)
 
 
 def verify_trajectory(traj: Trajectory, scene, geom: VehicleGeometry, cfg: PlanningConfig):
