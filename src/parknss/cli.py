@@ -37,6 +37,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "study",
     "results",
     "export",
+    "fidelity",
 )
 
 for _name in COMMAND_MODULES:
