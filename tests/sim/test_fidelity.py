@@ -67,6 +67,10 @@ def test_identical_runs_agree_perfectly(runs, which):
     s = summarize_fidelity([c, c, None])
     assert (s.cells, s.executed, s.both_completed) == (3, 2, 2)
     assert s.duration_dev_median == 0 and s.duration_dev_p90 == 0
+    assert s.phase_ratio_median == {"forward": 1.0, "reverse": 1.0, "stand": 1.0}
+    assert c.truth_forward_s > 0 and c.truth_reverse_s > 0 and c.truth_stand_s > 0
+    total = c.truth_forward_s + c.truth_reverse_s + c.truth_stand_s
+    assert total == pytest.approx(len(o.series["t"]) * 0.01)
     assert all(t.passed for t in s.targets), fidelity_text(s)
 
 
@@ -78,6 +82,9 @@ def test_a_delayed_trace_gives_the_expected_ratio_and_gear_timing(runs):
     assert c.gear_sequence_agree and c.gear_timing_mean_s == pytest.approx(2.0)
     assert c.goal_diff_cm == 0 and c.outcome_agree
     assert c.iso_vx < 1.0 and c.rmse_vx_ms > 0  # the late run is scored for being late
+    # the delay is standing time: forward and reverse times are the truth's
+    assert c.chain_stand_s == pytest.approx(c.truth_stand_s + 2.0)
+    assert (c.chain_forward_s, c.chain_reverse_s) == (c.truth_forward_s, c.truth_reverse_s)
     s = summarize_fidelity([c])
     assert s.duration_dev_median == pytest.approx(2.0 / truth.duration_s)
 

@@ -93,6 +93,13 @@ class CellFidelity:
     truth_gear_changes: int
     gear_sequence_agree: bool
     gear_timing_mean_s: float | None  # mean |Δt| of matching gear changes (same sequence)
+    # where the time goes (s): the tracker requesting forward, reverse, or standing
+    chain_forward_s: float | None = None
+    truth_forward_s: float | None = None
+    chain_reverse_s: float | None = None
+    truth_reverse_s: float | None = None
+    chain_stand_s: float | None = None
+    truth_stand_s: float | None = None
 
     @property
     def both_completed(self) -> bool:
@@ -115,6 +122,14 @@ def gear_changes(series: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]
     g = np.asarray(series["gear_cmd"], float)
     idx = np.flatnonzero(np.diff(g)) + 1
     return np.asarray(series["t"], float)[idx], g[idx]
+
+
+def phase_times(series: dict[str, np.ndarray], dt: float = DT) -> tuple[float, float, float]:
+    """Seconds with the tracker's speed request forward (> 0), reverse (< 0) and zero
+    (standing: steering at standstill, stops, holds, gear changes)."""
+    req = np.asarray(series.get("speed_req", ()), float)
+    fwd, rev = int(np.sum(req > 0)), int(np.sum(req < 0))
+    return fwd * dt, rev * dt, (len(req) - fwd - rev) * dt
 
 
 def _diff(a: float | None, b: float | None) -> float | None:
@@ -152,6 +167,8 @@ def compare_outcomes(
     tt, gt = gear_changes(truth.series) if ran else (np.zeros(0), np.zeros(0))
     same_gears = len(gc) == len(gt) and bool(np.all(gc == gt))
     ratio = chain.duration_s / truth.duration_s if ran and truth.duration_s > 0 else None
+    pc = phase_times(chain.series) if ran else (None, None, None)
+    pt = phase_times(truth.series) if ran else (None, None, None)
     return CellFidelity(
         cell=cell,
         chain_reason=chain.reason,
@@ -178,6 +195,12 @@ def compare_outcomes(
         truth_gear_changes=len(gt),
         gear_sequence_agree=same_gears,
         gear_timing_mean_s=float(np.mean(np.abs(tc - tt))) if same_gears and len(gc) else None,
+        chain_forward_s=pc[0],
+        truth_forward_s=pt[0],
+        chain_reverse_s=pc[1],
+        truth_reverse_s=pt[1],
+        chain_stand_s=pc[2],
+        truth_stand_s=pt[2],
     )
 
 
@@ -220,9 +243,14 @@ class FidelitySummary:
     gear_sequence_agree: int
     gear_timing_median_s: float | None
     targets: list[TargetLine]
+    phase_ratio_median: dict[str, float | None] | None = None  # chain/truth per phase
 
     def to_json(self) -> dict:
         return asdict(self)
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None or b <= 0 else a / b
 
 
 def _stat(fn, values) -> float | None:
@@ -266,6 +294,11 @@ def summarize_fidelity(
         gear_timing_median_s=_stat(np.median, [c.gear_timing_mean_s for c in ran]),
         targets=[],
     )
+    s.phase_ratio_median = {
+        ph: _stat(np.median, [_ratio(getattr(c, f"chain_{ph}_s"), getattr(c, f"truth_{ph}_s"))
+                              for c in both])
+        for ph in ("forward", "reverse", "stand")
+    }  # fmt: skip
     frac = agree / len(ran) if ran else None
     iso_mean = None if iso_vx is None or iso_wz is None else 0.5 * (iso_vx + iso_wz)
 
@@ -308,4 +341,9 @@ def fidelity_text(s: FidelitySummary) -> str:
         f"gear sequence agrees {s.gear_sequence_agree}/{s.executed}; gear timing |Δt| median "
         f"{_f(s.gear_timing_median_s, '.2f')} s",
     ]
+    if s.phase_ratio_median:
+        lines.append(
+            "time chain/truth, median per phase: "
+            + ", ".join(f"{k} {_f(v, '.3f')}" for k, v in s.phase_ratio_median.items())
+        )
     return "\n".join(lines + [t.text() for t in s.targets])
