@@ -1,6 +1,7 @@
 """Probe: where the learned chain departs from the truth (issue 44, the fidelity plan).
 
     python benchmarks/fidelity_probe.py [--cells 0,26] [--json]
+    python benchmarks/fidelity_probe.py --stops 31,12   # per-stop errors of grid cells
 
 Two measurements, both on the shipped chain (models/chain) and the reference vehicle:
 
@@ -118,11 +119,45 @@ def replay(cell: int, seed: int = 5) -> dict:
     return out
 
 
+def stop_errors(cell: int, seed: int = 5) -> dict:
+    """Each segment's stop, chain and truth on the same plan: the rear axle's position
+    at the segment's last sample against the segment's planned end pose, along the
+    direction of travel (> 0: overshoot, m) and across it (m)."""
+    scene = grid_scene(cell)
+    plan, outs = run_cell(scene, ["chain", "reference"], ClosedLoopConfig(plant_seed=seed))
+    segs = plan.trajectory.segments
+    doc = {"cell": cell, "scene": scene.meta.name}
+    for o in outs:
+        s = o.series
+        rows = []
+        for i, seg in enumerate(segs):
+            idx = np.flatnonzero(s["segment"] == i)
+            if not len(idx):
+                break
+            k = idx[-1]
+            ex, ey, eth = seg.poses[-1]
+            dx, dy = s["x"][k] - ex, s["y"][k] - ey
+            along = seg.direction * (dx * np.cos(eth) + dy * np.sin(eth))
+            across = -dx * np.sin(eth) + dy * np.cos(eth)
+            rows.append((float(along), float(across)))
+        doc[o.plant] = {"stops": rows, "goal_cm": o.goal_error_cm}
+    return doc
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cells", default="26")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--stops", default=None, help="cells whose per-stop errors to print")
     args = ap.parse_args()
+    if args.stops:
+        for c in args.stops.split(","):
+            d = stop_errors(int(c))
+            print(f"cell {d['cell']} ({d['scene']}): stop error along/across [cm] per segment")
+            for p in ("chain", "reference"):
+                st = " ".join(f"{100 * a:+.1f}/{100 * b:+.1f}" for a, b in d[p]["stops"])
+                print(f"  {p:<9} goal {d[p]['goal_cm']:.1f} cm | {st}")
+        return
     doc = {"steps": step_tests(), "replay": [replay(int(c)) for c in args.cells.split(",")]}
     if args.json:
         print(json.dumps(doc, indent=2))
