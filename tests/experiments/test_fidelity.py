@@ -52,3 +52,16 @@ def test_scene_sources(tmp_path):
         fidelity_specs()
     with pytest.raises(ConfigError):
         fidelity_specs(tpcap=tmp_path / "empty")
+
+
+def test_the_ceiling_scores_the_truth_against_itself_under_another_seed(tmp_path, capsys):
+    out = tmp_path / "ceil"
+    args = ["fidelity", "--scene", "26", "--candidate", "reference", "--no-figures"]
+    assert main([*args, "--out", str(out), "--json"]) == 0
+    c = json.loads(capsys.readouterr().out)["per_cell"][0]["fidelity"]
+    assert c["chain_reason"] == c["truth_reason"] == "completed"
+    assert c["gear_sequence_agree"] and abs(c["duration_ratio"] - 1) < 0.05
+    assert 0.5 < c["iso_vx"] < 1.0  # another noise draw: close, never identical
+    assert main(["fidelity", "--scene", "26", "--candidate", "kinematic", "--out",
+                 str(tmp_path / "bad")]) == 2  # fmt: skip
+    assert "--candidate" in capsys.readouterr().err

@@ -38,6 +38,11 @@ def register(app: typer.Typer) -> None:
         fidelity_config: Path | None = typer.Option(
             None, "--fidelity-config", help="Seeds and targets (configs/fidelity.yaml)."
         ),
+        candidate: str = typer.Option(
+            "chain",
+            "--candidate",
+            help="chain, or reference: the truth under another noise seed (the ceiling).",
+        ),
         no_figures: bool = typer.Option(False, "--no-figures", help="Skip the cell figures."),
         workers: int = WORKERS,
         executor: str = EXECUTOR,
@@ -58,10 +63,11 @@ def register(app: typer.Typer) -> None:
         files = SimConfigFiles(config, interface, planning_config, scenarios_config, vehicle)
         specs = fidelity_specs(grid, cells, tpcap, scene)
         label = f"grid {grid}" if grid else f"TPCAP {tpcap}" if tpcap else "scenes"
+        label += "" if candidate == "chain" else f" ({candidate}, ceiling)"
         doc = run_fidelity(
             specs, out, label=label, files=files, fidelity_config=fidelity_config,
-            figures=not no_figures, executor=executor, workers=workers, address=address,
-            overwrite=overwrite,
+            figures=not no_figures, candidate=candidate, executor=executor, workers=workers,
+            address=address, overwrite=overwrite,
         )  # fmt: skip
         if as_json:
             return typer.echo(json.dumps(doc, indent=2))

@@ -39,6 +39,7 @@ from parknss.sim.scene_formats import load_scene
 from parknss.sim.session import check_plants, run_cell
 
 PLANTS = ["chain", "reference"]
+CANDIDATES = ("chain", "reference")  # what is scored against the truth
 
 
 def fidelity_specs(
@@ -66,16 +67,34 @@ def fidelity_specs(
 
 
 def fidelity_job(
-    spec: str, seed: int, files: dict, iso: dict | None = None, figure_dir: str | None = None
+    spec: str,
+    seed: int,
+    files: dict,
+    iso: dict | None = None,
+    figure_dir: str | None = None,
+    candidate: str = "chain",
 ) -> dict:
-    """Executor job: plan ``spec`` once, drive it under the chain and the truth (noise
-    seed ``seed``), score the pair (ISO settings ``iso``, ISORatingConfig fields) and
-    draw its figure into ``figure_dir``; JSON."""
+    """Executor job: plan ``spec`` once, drive it under the candidate and the truth
+    (noise seed ``seed``), score the pair (ISO settings ``iso``, ISORatingConfig fields)
+    and draw its figure into ``figure_dir``; JSON. ``candidate`` "chain" (the learned
+    chain) or "reference" (the truth again under the noise seed ``seed + 1``: the
+    ceiling of every number, what the sensor noise alone costs)."""
+    if candidate not in CANDIDATES:
+        raise ConfigError(f"--candidate {candidate!r}: one of {', '.join(CANDIDATES)}")
     f = SimConfigFiles(**files)
     geom = f.vehicle_geometry()
     scene = load_scene(spec, f.scenarios_config(), geom)
     cfg = override(f.closed_loop_config(), {"plant_seed": seed}, source="fidelity seed")
-    plan, (chain, truth) = run_cell(scene, PLANTS, cfg, f.interface_config(), f.planning, geom)
+    icfg = f.interface_config()
+    if candidate == "chain":
+        plan, (chain, truth) = run_cell(scene, PLANTS, cfg, icfg, f.planning, geom)
+    else:
+        plan, (truth,) = run_cell(scene, ["reference"], cfg, icfg, f.planning, geom)
+        other = override(cfg, {"plant_seed": seed + 1}, source="fidelity ceiling seed")
+        chain = truth
+        if plan.trajectory is not None:
+            _, (chain,) = run_cell(scene, ["reference"], other, icfg, f.planning, geom,
+                                   trajectory=plan.trajectory)  # fmt: skip
     doc = {"spec": spec, "scene": scene.meta.name, "seed": seed,
            "plannable": plan.trajectory is not None, "plan_reason": plan.reason,
            "fidelity": None, "figure": None}  # fmt: skip
@@ -84,13 +103,13 @@ def fidelity_job(
     cell = compare_outcomes(chain, truth, scene.meta.name, ISORatingConfig(**(iso or {})))
     doc["fidelity"] = cell.to_json()
     if figure_dir is not None:
-        title = (f"{scene.meta.name}: chain {chain.reason} {chain.duration_s:.1f} s, truth "
+        title = (f"{scene.meta.name}: {candidate} {chain.reason} {chain.duration_s:.1f} s, truth "
                  f"{truth.reason} {truth.duration_s:.1f} s; ISO vx {_f(cell.iso_vx)}, "
                  f"ω_z {_f(cell.iso_yaw_rate)}")  # fmt: skip
         path = Path(figure_dir) / f"fidelity_{scene.meta.name}.png"
-        doc["figure"] = str(
-            draw_fidelity({"chain": chain.series, "reference": truth.series}, path, title)
-        )
+        name = candidate if candidate == "chain" else "truth, seed + 1"
+        runs = {name: chain.series, "reference": truth.series}
+        doc["figure"] = str(draw_fidelity(runs, path, title))
     return doc
 
 
@@ -143,6 +162,7 @@ def run_fidelity(
     files: SimConfigFiles | None = None,
     fidelity_config: str | Path | None = None,
     figures: bool = True,
+    candidate: str = "chain",
     executor: str = "local",
     workers: int = 1,
     address: str | None = None,
@@ -150,21 +170,27 @@ def run_fidelity(
     progress: bool = True,
 ) -> dict:
     """``parknss fidelity``: score ``specs`` (:func:`fidelity_specs`) in the run folder
-    ``out``; the report (summary with target lines, cells, file paths)."""
+    ``out``; the report (summary with target lines, cells, file paths). ``candidate``:
+    see :func:`fidelity_job`."""
     from parknss.executor import Job, run_jobs
 
     files = files or SimConfigFiles()
     fcfg = load_fidelity_config(fidelity_config)
+    if candidate not in CANDIDATES:
+        raise ConfigError(f"--candidate {candidate!r}: one of {', '.join(CANDIDATES)}")
     check_plants(PLANTS, files.closed_loop_config(), files.vehicle_geometry())
     identity = {
         "scenes": specs,
         "fidelity_config": None if fidelity_config is None else Path(fidelity_config),
         "figures": figures,
+        **({} if candidate == "chain" else {"candidate": candidate}),
         **config_paths(files),
     }
     with run_folder(out, command="parknss fidelity", args=identity, overwrite=overwrite) as run:
         figdir = str((out / "cells").resolve()) if figures else None
         common = {"files": files.to_json(), "iso": fcfg.iso.model_dump(), "figure_dir": figdir}
+        if candidate != "chain":  # the chain's job keys stay those of earlier runs
+            common["candidate"] = candidate
         jobs = [
             Job(f"{__name__}:fidelity_job", {"spec": s, "seed": cell_seed(fcfg.seed, s), **common},
                 name=s)
@@ -184,7 +210,8 @@ def run_fidelity(
         cells = [None if d["fidelity"] is None else CellFidelity(**d["fidelity"]) for d in docs]
         summary = summarize_fidelity(cells, fcfg.targets)
         text = fidelity_text(summary)
-        title = f"Closed-loop fidelity of the chain against the truth: {label}"
+        who = "the chain" if candidate == "chain" else "the truth under another seed (ceiling)"
+        title = f"Closed-loop fidelity of {who} against the truth: {label}"
         report = {"label": label, "cells": len(specs), "wall_s": round(wall, 2),
                   "summary": summary.to_json(), "text": text, "per_cell": docs}  # fmt: skip
         blank = {f.name: None for f in fields(CellFidelity)}
