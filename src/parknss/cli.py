@@ -50,6 +50,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "study",
     "results",
     "export",
+    "fidelity",
 )
 
 show_warnings_as_lines()  # tolerated-input warnings: one line each, no source path

@@ -1,0 +1,195 @@
+"""Probe: where the learned chain departs from the truth (issue 44, the fidelity plan).
+
+    python benchmarks/fidelity_probe.py [--cells 0,26] [--json]
+    python benchmarks/fidelity_probe.py --stops 31,12   # per-stop errors of grid cells
+
+Two measurements, both on the shipped chain (models/chain) and the reference vehicle:
+
+1. **Step tests** (open loop, from rest in gear, brake released, steering wheel at 0 or
+   360° = 90 % of the lock, forward and reverse): the creep (no torque, no brake, 8 s),
+   then the stop from it under the interface's hold (decel_cmd -0.6 m/s², 3 s); and a
+   launch (15 or 30 N·m for 2 s). Per test: the speed reached, the curvature ω/vx, the
+   time to stop (true |vx| < 0.01 m/s; "-" if still moving) and the speed left after the
+   hold, chain against truth (true states of both).
+2. **Command replay**: a grid cell is driven in closed loop under the truth; its
+   recorded command sequence (gear, torque, deceleration, steering) is replayed open loop
+   into the chain and into a fresh truth of the same seed (which reproduces the run).
+   Per regime of the truth's samples, the chain's true vx and yaw-rate errors:
+   launch/creep (a drive gear, 0 < |vx| < the blind zone 0.139 m/s, accelerating),
+   stop (same speeds, decelerating), hold (|vx| < 0.01 m/s), cruise forward / reverse
+   (|vx| ≥ the blind zone), and full lock (|steer| ≥ 300° while moving).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from parknss.plant import Commands
+from parknss.sim.closed_loop import ClosedLoopConfig
+from parknss.sim.plants import ChainPlant, ReferencePlant
+from parknss.sim.scenarios import grid_scene
+from parknss.sim.session import run_cell
+
+BLIND = 0.5 / 3.6  # the wheel-speed blind zone, m/s
+
+
+def _run(plant, cmds: list[Commands], gear: int) -> np.ndarray:
+    """True (vx, yaw rate) and bus vx after each command; from rest in ``gear``."""
+    y = plant.reset(gear=gear)
+    out = [(plant.truth(y).vx, plant.truth(y).yaw_rate, y.vx)]
+    for c in cmds[:-1]:
+        y = plant.step(c)
+        t = plant.truth(y)
+        out.append((t.vx, t.yaw_rate, y.vx))
+    return np.array(out)
+
+
+def step_tests(seed: int = 5) -> list[dict]:
+    """Creep (8 s, no torque, no brake), a launch (``torque`` N·m for 2 s from rest) and
+    the stop from the creep under the interface's hold (decel_cmd -0.6 m/s², 3 s)."""
+    rows = []
+    for gear in (1, -1):
+        for steer in (0.0, 360.0):
+            for torque in (0.0, 15.0, 30.0):
+                if torque == 0.0:
+                    cmds = [Commands(gear, 0.0, 0.0, steer)] * 800
+                    cmds += [Commands(gear, 0.0, -0.6, steer)] * 300
+                else:
+                    cmds = [Commands(gear, torque, 0.0, steer)] * 200
+                res = {}
+                for name, plant in (("chain", ChainPlant()), ("truth", ReferencePlant(seed=seed))):
+                    s = _run(plant, cmds, gear)
+                    end = 799 if torque == 0.0 else 199
+                    vx, w = s[end, :2]
+                    r = {"vx": float(vx), "curvature": float(w / vx) if abs(vx) > 0.05 else None}
+                    if torque == 0.0:
+                        after = s[800:, 0]
+                        moving = np.flatnonzero(np.abs(after) >= 0.01)
+                        r["stop_s"] = (
+                            None
+                            if len(moving) and moving[-1] == len(after) - 1
+                            else float((moving[-1] + 1 if len(moving) else 0) * 0.01)
+                        )
+                        r["vx_after_hold"] = float(after[-1])
+                    res[name] = r
+                rows.append({"gear": gear, "steer_deg": steer, "torque_nm": torque, **res})
+    return rows
+
+
+def replay(cell: int, seed: int = 5) -> dict:
+    scene = grid_scene(cell)
+    cfg = ClosedLoopConfig(plant_seed=seed)
+    _, (truth_run,) = run_cell(scene, ["reference"], cfg)
+    s = truth_run.series
+    cmds = [
+        Commands(int(g), float(tq), float(d), float(st))
+        for g, tq, d, st in zip(
+            s["gear_cmd"], s["torque_cmd"], s["decel_cmd"], s["steer_cmd"], strict=True
+        )
+    ]
+    chain = _run(ChainPlant(), cmds, 0)
+    truth = _run(ReferencePlant(seed=seed), cmds, 0)
+    v, dv = truth[:, 0], np.gradient(truth[:, 0]) * 100.0
+    a = np.abs(v)
+    regimes = {
+        "launch/creep": (a > 0.01) & (a < BLIND) & (dv * np.sign(v) > 0),
+        "stop": (a > 0.01) & (a < BLIND) & (dv * np.sign(v) <= 0),
+        "hold": a <= 0.01,
+        "cruise forward": v >= BLIND,
+        "cruise reverse": v <= -BLIND,
+        "full lock": (a >= BLIND) & (np.abs(s["steer_cmd"]) >= 300.0),
+    }
+    out = {"cell": cell, "scene": scene.meta.name, "samples": len(v)}
+    for name, m in regimes.items():
+        if not m.any():
+            continue
+        e_v = chain[m, 0] - v[m]
+        e_w = np.degrees(chain[m, 1] - truth[m, 1])
+        out[name] = {
+            "share": float(m.mean()),
+            "vx_bias_ms": float(e_v.mean()),
+            "vx_rmse_ms": float(np.sqrt(np.mean(e_v**2))),
+            "yaw_rmse_dps": float(np.sqrt(np.mean(e_w**2))),
+        }
+    # the replayed truth reproduces the closed-loop run: its bus vx, sample for sample
+    out["replay_bus_vx_max_dev"] = float(np.max(np.abs(truth[:, 2] - s["vx"])))
+    return out
+
+
+def stop_errors(cell: int, seed: int = 5) -> dict:
+    """Each segment's stop, chain and truth on the same plan: the rear axle's position
+    at the segment's last sample against the segment's planned end pose, along the
+    direction of travel (> 0: overshoot, m) and across it (m)."""
+    scene = grid_scene(cell)
+    plan, outs = run_cell(scene, ["chain", "reference"], ClosedLoopConfig(plant_seed=seed))
+    segs = plan.trajectory.segments
+    doc = {"cell": cell, "scene": scene.meta.name}
+    for o in outs:
+        s = o.series
+        rows = []
+        for i, seg in enumerate(segs):
+            idx = np.flatnonzero(s["segment"] == i)
+            if not len(idx):
+                break
+            k = idx[-1]
+            ex, ey, eth = seg.poses[-1]
+            dx, dy = s["x"][k] - ex, s["y"][k] - ey
+            along = seg.direction * (dx * np.cos(eth) + dy * np.sin(eth))
+            across = -dx * np.sin(eth) + dy * np.cos(eth)
+            rows.append((float(along), float(across)))
+        doc[o.plant] = {"stops": rows, "goal_cm": o.goal_error_cm}
+    return doc
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cells", default="26")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--stops", default=None, help="cells whose per-stop errors to print")
+    args = ap.parse_args()
+    if args.stops:
+        for c in args.stops.split(","):
+            d = stop_errors(int(c))
+            print(f"cell {d['cell']} ({d['scene']}): stop error along/across [cm] per segment")
+            for p in ("chain", "reference"):
+                st = " ".join(f"{100 * a:+.1f}/{100 * b:+.1f}" for a, b in d[p]["stops"])
+                print(f"  {p:<9} goal {d[p]['goal_cm']:.1f} cm | {st}")
+        return
+    doc = {"steps": step_tests(), "replay": [replay(int(c)) for c in args.cells.split(",")]}
+    if args.json:
+        print(json.dumps(doc, indent=2))
+        return
+    print(
+        "step tests (true states): gear steer torque | vx (creep at 8 s, launch at 2 s) "
+        "chain/truth | curvature chain/truth | stop s chain/truth | vx after 3 s hold"
+    )
+    for r in doc["steps"]:
+        c, t = r["chain"], r["truth"]
+
+        def f(v, spec=".3f"):
+            return "-" if v is None else format(v, spec)
+
+        print(
+            f"{r['gear']:>3} {r['steer_deg']:>5.0f} {r['torque_nm']:>5.0f} | "
+            f"{f(c['vx'])}/{f(t['vx'])} | {f(c['curvature'])}/{f(t['curvature'])} | "
+            f"{f(c.get('stop_s'), '.2f')}/{f(t.get('stop_s'), '.2f')} | "
+            f"{f(c.get('vx_after_hold'), '.4f')}/{f(t.get('vx_after_hold'), '.4f')}"
+        )
+    for r in doc["replay"]:
+        print(
+            f"replay cell {r['cell']} ({r['scene']}, {r['samples']} samples; replayed "
+            f"truth's bus vx within {r['replay_bus_vx_max_dev']:.2g} m/s of the run):"
+        )
+        for k, v in r.items():
+            if isinstance(v, dict):
+                print(
+                    f"  {k:<15} share {v['share']:.2f}  vx bias {v['vx_bias_ms']:+.3f} m/s  "
+                    f"vx rmse {v['vx_rmse_ms']:.3f} m/s  yaw rmse {v['yaw_rmse_dps']:.2f} °/s"
+                )
+
+
+if __name__ == "__main__":
+    main()
