@@ -39,6 +39,23 @@ COMMAND_MODULES: tuple[str, ...] = (
     "export",
 )
 
+def _version(value: bool) -> None:
+    if value:
+        from parknss import __version__
+
+        typer.echo(f"parknss {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Identify a physics-informed NSS plant of a car at parking speeds, prove its
+    fidelity, and park through it."""
+
+
 for _name in COMMAND_MODULES:
     importlib.import_module(f"parknss.commands.{_name}").register(app)
 
