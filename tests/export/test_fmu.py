@@ -120,3 +120,13 @@ def test_leaving_the_identified_domain_is_reported(shipped_fmu):
     assert res["domain_exits"][-1] == pytest.approx(50, abs=1)
     warn = [ln for ln in lines if "decel_cmd" in ln and "outside the identified domain" in ln]
     assert len(warn) == 1 and "clamped" in warn[0] and "[-0.8, 0]" in warn[0], lines
+
+
+def test_verify_reports_progress_per_trial(shipped_fmu):
+    """--verify's replay takes seconds per trial: each finished trial is reported."""
+    trials = [t for t in default_campaign() if t.repetition == 1][:2]
+    seen = []
+    errs = fmu_trial_errors(shipped_fmu.path, load_chain(shipped_fmu_chain()), trials,
+                            lambda i, n, e: seen.append((i, n, e.trial)))
+    assert seen == [(1, 2, trials[0].id), (2, 2, trials[1].id)]
+    assert [e.trial for e in errs] == [t.id for t in trials]

@@ -15,7 +15,7 @@ is verified too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -101,12 +101,17 @@ def _quiet(*_args) -> None:
     """FMPy logger that drops the FMU's domain warnings (the outputs carry them)."""
 
 
-def fmu_trial_errors(fmu: str | Path, dep: DeployedChain, trials: Iterable[Trial]
+def fmu_trial_errors(fmu: str | Path, dep: DeployedChain, trials: Iterable[Trial],
+                     progress: Callable[[int, int, TrialErrors], None] | None = None
                      ) -> list[TrialErrors]:
-    """:class:`TrialErrors` of every trial (see the module doc)."""
+    """:class:`TrialErrors` of every trial (see the module doc); ``progress(i, n, errors)``
+    is called after each trial (the replay takes seconds per trial)."""
+    trials = list(trials)
     out = []
-    for tr in trials:
+    for i, tr in enumerate(trials, start=1):
         diff = np.abs(simulate_trial(fmu, tr) - realtime_reference(dep, tr))
         out.append(TrialErrors(tr.id, tr.n, dict(zip(CHAIN_OUTPUTS, diff.max(axis=0).tolist(),
                                                      strict=True))))
+        if progress is not None:
+            progress(i, len(trials), out[-1])
     return out
