@@ -53,6 +53,22 @@ COMMAND_MODULES: tuple[str, ...] = (
     "fidelity",
 )
 
+def _version(value: bool) -> None:
+    if value:
+        from parknss import __version__
+
+        typer.echo(f"parknss {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Identify a physics-informed NSS plant of a car at parking speeds, prove its
+    fidelity, and park through it."""
+
 show_warnings_as_lines()  # tolerated-input warnings: one line each, no source path
 
 for _name in COMMAND_MODULES:

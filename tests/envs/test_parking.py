@@ -18,9 +18,31 @@ gym = pytest.importorskip("gymnasium")
 
 
 def test_env_checker_passes():
+    import warnings
+
     from gymnasium.utils.env_checker import check_env
 
-    check_env(ParkingEnv(render_mode="rgb_array"), skip_render_check=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(ParkingEnv(render_mode="rgb_array"), skip_render_check=False)
+    texts = [str(w.message) for w in caught]
+    assert not [t for t in texts if "bound" in t.lower() or "infin" in t.lower()], texts
+
+
+def test_observation_space_is_finite_and_holds_every_observation():
+    """Finite bounds from the scenes' maps and the speed bound; a car driven at full
+    torque (raw commands) is reported at the speed bound, never outside the space."""
+    env = ParkingEnv(plant="chain", actions="raw", obs_speed_max_ms=0.2)
+    box = env.observation_space["observation"]
+    assert np.all(np.isfinite(box.low)) and np.all(np.isfinite(box.high))
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    fastest = 0.0
+    for _ in range(40):
+        obs, *_ = env.step(np.array([1.0, 1.0, 0.0, 1.0], np.float32))
+        assert env.observation_space.contains(obs)
+        fastest = max(fastest, float(np.hypot(*obs["observation"][2:4])) * 5.0)
+    assert fastest == pytest.approx(0.2, abs=1e-6)  # the chain reaches 0.2 m/s: clamped
 
 
 def test_reward_is_highway_envs_weighted_p_norm():
@@ -59,15 +81,16 @@ def test_time_limit_truncates_and_success_terminates():
     env.reset(seed=0)
     steps = 0
     while True:
-        _, _, term, trunc, _ = env.step(np.zeros(2, np.float32))
+        _, _, term, trunc, info = env.step(np.zeros(2, np.float32))
         steps += 1
         if term or trunc:
             break
-    assert trunc and not term and steps == 5
+    assert trunc and not term and steps == 5 and info["reason"] == "time_limit"
     env.reset(seed=0)
     env.goal = env._obs()["achieved_goal"]  # standing on the goal: success at once
     _, r, term, _, info = env.step(np.zeros(2, np.float32))
     assert term and info["is_success"] and r > -env.cfg.success_goal_reward
+    assert info["reason"] == "success"
 
 
 def test_collision_terminates():
@@ -78,14 +101,23 @@ def test_collision_terminates():
         if term or trunc:
             break
     assert term and info["crashed"] and r < env.cfg.collision_reward + 1e-9
+    assert info["reason"] in ("collision", "left_map")
 
 
 def test_render_rgb_array():
+    """An RGB array; driving adds the trail and moves the car and its heading arrow, so
+    the picture changes where the car went (and only a little elsewhere)."""
     env = ParkingEnv(render_mode="rgb_array")
     env.reset(seed=1)
     img = env.render()
     assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
     assert img.std() > 0  # something is drawn
+    for _ in range(15):
+        env.step(np.array([0.6, 0.3], np.float32))
+    later = env.render()
+    assert later.shape == img.shape
+    changed = np.any(later != img, axis=2)
+    assert 0.001 < changed.mean() < 0.2  # the trail, the car, the arrow, the title
 
 
 def test_vector_env_matches_single_envs():

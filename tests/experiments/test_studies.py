@@ -224,8 +224,11 @@ def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tm
     # window: the baseline and the longest window
     gaps = {u.name: (u.missing, u.total) for u in res.unmeasured}
     assert gaps == {"loss": (3, 4), "training window": (1, 2)}
-    rows = ablation_tables(res)[0].rows
+    table = ablation_tables(res)[0]
+    rows = table.rows
     assert rows[-2][:2] == ["loss", "not measured: 3 of 4 fits are not stored"]
+    assert all(c.strip() for c in table.columns)  # no blank header
+    assert {"vx [(km/h)²]", "ω_z [(°/s)²]", "vx vs truth [(km/h)²]"} <= set(table.columns)
     found = {f.claim: f for f in ablation_findings(res)}
     loss = next(f for c, f in found.items() if c.startswith("MAE"))
     assert loss.verdict == "not measured" and "3 of 4 fits are not stored" in loss.measured

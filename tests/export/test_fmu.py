@@ -75,3 +75,58 @@ def test_refusals(shipped_fmu, tmp_path):
         export_fmu(shipped_fmu.path)
     with pytest.raises(ParknssError, match=r"ends in \.fmu"):
         export_fmu(tmp_path / "chain.zip")
+
+
+def test_model_description_units_types_and_experiment(shipped_fmu):
+    """FMI units on every Real with a unit (FMPy reads them), Integer gears, the generation
+    date and a default experiment with a stop time."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(shipped_fmu.path))
+    by = {v.name: v for v in md.modelVariables}
+    assert by["vx"].unit == "m/s" and by["brake_pressure"].unit == "bar"
+    assert by["steer_cmd"].unit == "deg" and by["torque"].unit == "N.m"
+    assert by["gear"].type == "Integer" and by["gear"].variability == "discrete"
+    assert by["gear_engaged"].type == "Integer" and by["in_domain"].type == "Integer"
+    assert {u.name for u in md.unitDefinitions} >= {"m/s", "bar", "deg", "N.m", "rad/s"}
+    assert md.generationDateAndTime and md.generationDateAndTime.endswith("Z")
+    assert float(md.defaultExperiment.stopTime) > 0
+    assert float(md.defaultExperiment.stepSize) == 0.01
+
+
+def test_leaving_the_identified_domain_is_reported(shipped_fmu):
+    """A -1 m/s² deceleration request (the domain is [-0.8, 0]) is clamped, and the FMU
+    says so: in_domain drops to 0, domain_exits counts the samples, one warning line per
+    excursion names the variable, its value and the range."""
+    from fmpy import simulate_fmu
+
+    n = 300
+    t = np.arange(n) * 0.01
+    sig = np.zeros(n, dtype=[("time", float), ("gear", np.int32), ("torque_cmd", float),
+                             ("decel_cmd", float), ("steer_cmd", float)])
+    sig["time"], sig["gear"] = t, 1
+    sig["decel_cmd"] = np.where((t >= 1.0) & (t < 1.5), -1.0, 0.0)
+    lines: list[str] = []
+
+    def logger(_env, _name, status, category, message):
+        lines.append(f"{status} {category.decode()} {message.decode()}")
+
+    res = simulate_fmu(str(shipped_fmu.path), input=sig, output_interval=0.01,
+                       stop_time=n * 0.01, output=["in_domain", "domain_exits", "vx"],
+                       logger=logger)
+    inside = res["in_domain"]
+    assert inside[:90].min() == 1 and inside[-50:].min() == 1
+    assert inside.min() == 0
+    assert res["domain_exits"][-1] == pytest.approx(50, abs=1)
+    warn = [ln for ln in lines if "decel_cmd" in ln and "outside the identified domain" in ln]
+    assert len(warn) == 1 and "clamped" in warn[0] and "[-0.8, 0]" in warn[0], lines
+
+
+def test_verify_reports_progress_per_trial(shipped_fmu):
+    """--verify's replay takes seconds per trial: each finished trial is reported."""
+    trials = [t for t in default_campaign() if t.repetition == 1][:2]
+    seen = []
+    errs = fmu_trial_errors(shipped_fmu.path, load_chain(shipped_fmu_chain()), trials,
+                            lambda i, n, e: seen.append((i, n, e.trial)))
+    assert seen == [(1, 2, trials[0].id), (2, 2, trials[1].id)]
+    assert [e.trial for e in errs] == [t.id for t in trials]

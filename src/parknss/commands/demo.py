@@ -3,11 +3,14 @@
 Describes the campaign, evaluates and rates the shipped NSS and chain, parks one grid cell
 through the kinematic plant and the learned chain, and writes every figure and
 ``summary.json`` to ``--out`` (:func:`parknss.experiments.demo.run_demo`), a run folder
-refused if it holds anything but the same demo unless ``--overwrite``.
+refused if it holds anything but the same demo unless ``--overwrite``. ``--json`` prints
+the summary document (what ``summary.json`` holds) on stdout, the tables and progress on
+stderr.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import typer
@@ -34,6 +37,8 @@ def register(app: typer.Typer) -> None:
         overwrite: bool = typer.Option(
             False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
         ),
+        as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON "
+                                     "document (tables and progress on stderr)."),
     ) -> None:
         """Describe the campaign, evaluate and rate the shipped plant, park through it."""
         from parknss.experiments.demo import DemoInputs, run_demo, summary_text
@@ -41,6 +46,6 @@ def register(app: typer.Typer) -> None:
         shipped = {"nss": nss, "chain": chain}  # None: DemoInputs' shipped default
         inputs = DemoInputs(out=out, data=data, cell=cell, overwrite=overwrite,
                             **{k: v for k, v in shipped.items() if v is not None})
-        doc = run_demo(inputs, _log, typer.echo)
-        typer.echo(summary_text(doc))
+        doc = run_demo(inputs, _log, _log if as_json else typer.echo)
+        typer.echo(json.dumps(doc, indent=2) if as_json else summary_text(doc))
         _log(f"done in {doc['wall_s']} s: artefacts in {out} (summary.json, PNG figures)")

@@ -45,7 +45,12 @@ def register(app: typer.Typer) -> None:
             from parknss.nss.campaigns import load_campaign
 
             trials = list(load_campaign(data, "actuators", "parknss export fmu --verify"))
-            errs = fmu_trial_errors(out, load_chain(chain or SHIPPED_CHAIN), trials)
+
+            def show(i: int, n: int, e) -> None:
+                typer.echo(f"[verify] {i}/{n} {e.trial}: largest difference {e.worst:.3g}",
+                           err=True)
+
+            errs = fmu_trial_errors(out, load_chain(chain or SHIPPED_CHAIN), trials, show)
             doc["verify"] = {e.trial: e.max_abs for e in errs}
             doc["verify_worst"] = max(e.worst for e in errs)
         if as_json:

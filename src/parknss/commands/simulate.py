@@ -20,7 +20,8 @@ INTERFACE = typer.Option(None, "--interface", help="Interface gains YAML.")
 PLANNING = typer.Option(None, "--planning-config", help="Planning YAML.")
 SCENARIOS = typer.Option(None, "--scenarios-config", help="Scenarios YAML.")
 VEHICLE = typer.Option(
-    None, "--vehicle", help="Vehicle YAML (default: the chain's car): configs/tpcap_vehicle.yaml."
+    None, "--vehicle", help="Vehicle YAML (default: the chain's car; e.g. "
+    "configs/tpcap_vehicle.yaml for the TPCAP benchmark's car)."
 )
 EXECUTOR = typer.Option("local", "--executor", help="local (loky pool) or ray.")
 ADDRESS = typer.Option(None, "--address", help="Ray cluster address (--executor ray).")

@@ -34,6 +34,9 @@ class EnvConfig(StrictModel):
         None, description="vehicle YAML: the car planned, drawn and (reference) driven; "
         "None: the chain's own car (parknss.sim.vehicles.resolve_vehicle)")
     render_dpi: int = Field(60, ge=20, le=300)
+    obs_speed_max_ms: float = Field(
+        5.0, gt=0, description="bound of the observed speed, m/s: the observation space is "
+        "finite, and a faster car (raw commands) is reported at this bound")
 
 
 def load_env_config(path: str | Path | None = None, **overrides) -> EnvConfig:

@@ -8,6 +8,9 @@ per env step.
 * **Observation**: a Dict of ``observation``, ``achieved_goal`` (both the rear-axle state
   [x, y, vx·cos h, vx·sin h, cos h, sin h] divided by ``obs_scales``) and ``desired_goal``
   (the goal pose in the same features, speed 0), float32 (6,), as highway-env's parking-v0.
+  The space is finite: x, y within the union of the scenes' maps grown by the car's length,
+  the speed within ``obs_speed_max_ms`` (a faster car, raw commands only, is reported at
+  that bound: the one documented clamp).
 * **Action** (Box [-1, 1]): ``requests`` (default) [speed, steer]: a signed speed request of
   up to ``max_speed_ms`` (|a| below ``speed_deadband``: stop and hold) and a steering-wheel
   angle of up to the lock, through the plant's command interface
@@ -20,10 +23,14 @@ per env step.
   ``collision_reward`` on a collision.
 * **Termination** on success (goal reward > -``success_goal_reward``) or a collision (the
   footprint overlaps an obstacle or leaves the map), **truncation** at ``time_limit_s``.
+  ``info["reason"]`` says which: ``"success"``, ``"collision"``, ``"left_map"``,
+  ``"time_limit"`` (``None`` while the episode runs).
 * **Seeding**: ``reset(seed=...)`` draws the scene (and the reference plant's sensor seed)
   from the env's generator, so the same seed gives the same episode.
 * ``render()`` returns an RGB array drawn by the report's scene drawing
-  (:func:`parknss.report.plan_figure.scene_axes`, ``outline``).
+  (:func:`parknss.report.plan_figure.scene_axes`, ``outline``): the map in metres with
+  axes, the goal (dotted), the car's footprint with a heading arrow, and the rear axle's
+  trail so far (solid forward, dashed reverse).
 """
 
 from __future__ import annotations
@@ -77,7 +84,7 @@ class ParkingEnv(gym.Env):
         self._scene_specs = self._scenes(self.cfg.scenes, self.geom)
         self._scene_cache: dict[Any, sc.Scene] = {}
         self.plant = None if self.cfg.plant == "reference" else self._make_plant(None)
-        box = spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float32)
+        box = self._observation_box()
         self.observation_space = spaces.Dict(
             {"observation": box, "achieved_goal": box, "desired_goal": box})
         n_act = 4 if self.cfg.actions == "raw" else 2
@@ -106,9 +113,23 @@ class ParkingEnv(gym.Env):
                           chain_engine=self.cfg.chain_engine)
 
     # ---------------------------------------------------------- observation
+    def _observation_box(self) -> spaces.Box:
+        """The finite feature box (module doc): every scene's map grown by the car's length
+        (the rear axle of a car whose footprint just left the map), the speed bound."""
+        b = np.array([self._scene(k).bounds for k in self._scene_specs], dtype=float)
+        grow = self.geom.length + self.cfg.max_speed_ms * self.cfg.steps_per_action * 0.01
+        v = self.cfg.obs_speed_max_ms
+        lo = np.array([b[:, 0].min() - grow, b[:, 1].min() - grow, -v, -v, -1.0, -1.0])
+        hi = np.array([b[:, 2].max() + grow, b[:, 3].max() + grow, v, v, 1.0, 1.0])
+        sc_ = np.asarray(self.cfg.obs_scales, float)
+        self._obs_lo, self._obs_hi = (lo / sc_).astype(np.float32), (hi / sc_).astype(np.float32)
+        return spaces.Box(self._obs_lo, self._obs_hi, shape=(6,), dtype=np.float32)
+
     def _features(self, x: float, y: float, h: float, v: float) -> np.ndarray:
+        v = min(max(v, -self.cfg.obs_speed_max_ms), self.cfg.obs_speed_max_ms)
         f = np.array([x, y, v * math.cos(h), v * math.sin(h), math.cos(h), math.sin(h)])
-        return (f / np.asarray(self.cfg.obs_scales)).astype(np.float32)
+        f = (f / np.asarray(self.cfg.obs_scales)).astype(np.float32)
+        return np.clip(f, self._obs_lo, self._obs_hi)
 
     def _obs(self) -> dict[str, np.ndarray]:
         x, y, h = self.integ.pose
@@ -142,7 +163,9 @@ class ParkingEnv(gym.Env):
         self.t = 0.0
         gx, gy, gh = self.scene.goal
         self.goal = self._features(gx, gy, gh, 0.0)
-        return self._obs(), {"scene": self.scene.meta.name, "is_success": False}
+        self.trail = [(*self.integ.pose[:2], 1)]
+        return self._obs(), {"scene": self.scene.meta.name, "is_success": False,
+                             "reason": None}
 
     def _command(self, a: np.ndarray) -> Commands:
         lock = self.geom.steer_lock_deg
@@ -187,6 +210,8 @@ class ParkingEnv(gym.Env):
     def outcome(self, poses: list):
         """(obs, reward, terminated, truncated, info) after the samples of ``poses``."""
         p = np.asarray(poses)
+        sign = 1 if self.y.vx >= 0 else -1
+        self.trail.extend((float(x), float(y), sign) for x, y in p[:, :2])
         hit = bool(np.any(geometry.collides(p, self.geom, self.obstacles, circles=self.circles)))
         out = not bool(np.all(geometry.inside_bounds(p, self.geom, self.scene.bounds)))
         obs = self._obs()
@@ -196,13 +221,17 @@ class ParkingEnv(gym.Env):
             reward += self.cfg.collision_reward
         terminated = bool(success or hit or out)
         truncated = bool(self.t >= self.cfg.time_limit_s - 1e-9) and not terminated
+        reason = ("success" if success else "collision" if hit else "left_map" if out
+                  else "time_limit" if truncated else None)
         info = {"is_success": bool(success), "crashed": hit or out, "t": self.t,
-                "gear": self.y.gear}
+                "gear": self.y.gear, "reason": reason}
         return obs, reward, terminated, truncated, info
 
     # -------------------------------------------------------------- render
     def render(self) -> np.ndarray | None:
-        """The scene, the goal (dotted) and the car's footprint as an RGB array (H, W, 3)."""
+        """The scene with axes in metres, the goal (dotted), the rear axle's trail (solid
+        forward, dashed reverse) and the car's footprint with a heading arrow, as an RGB
+        array (H, W, 3)."""
         if self.render_mode != "rgb_array" or self.scene is None:
             return None
         import matplotlib.pyplot as plt
@@ -212,12 +241,24 @@ class ParkingEnv(gym.Env):
         fig, ax = scene_axes(self.scene, frame=True)
         try:
             outline(ax, geometry.footprint(self.scene.goal, self.geom), color="#1e8449", ls=":")
+            tr = np.asarray(self.trail)
+            cut = np.flatnonzero(np.diff(tr[:, 2])) + 1  # direction changes
+            for seg in np.split(tr, cut):
+                ax.plot(seg[:, 0], seg[:, 1], "-" if seg[0, 2] > 0 else "--",
+                        color="#5dade2", lw=1.2)
             outline(ax, geometry.footprint(self.integ.pose, self.geom), color="#2471a3", lw=2)
+            x, y, h = self.integ.pose
+            arrow = 0.6 * self.geom.wheelbase
+            ax.annotate("", xy=(x + arrow * math.cos(h), y + arrow * math.sin(h)), xytext=(x, y),
+                        arrowprops={"arrowstyle": "-|>", "color": "#2471a3", "lw": 1.5})
             xmin, ymin, xmax, ymax = self.scene.bounds
             ax.set_aspect("equal")
             ax.set_xlim(xmin - 0.5, xmax + 0.5)
             ax.set_ylim(ymin - 0.5, ymax + 0.5)
-            ax.set_title(f"{self.scene.meta.name}  t = {self.t:.1f} s")
+            ax.set_xlabel("x [m]")
+            ax.set_ylabel("y [m]")
+            ax.set_title(f"{self.scene.meta.name}  t = {self.t:.1f} s  vx = {self.y.vx:+.2f} m/s"
+                         f"  gear {self.y.gear:+.0f}")
             fig.set_dpi(self.cfg.render_dpi)
             fig.canvas.draw()
             return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()

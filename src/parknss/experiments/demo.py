@@ -11,6 +11,12 @@ Five steps, each writing its artefacts to the run folder:
    and the learned chain (Fig. 8, Fig. 9);
 5. ``summary.json`` with every number printed (:func:`summary_text`).
 
+``summary.json`` is tidy (:func:`tidy`): floats at 6 significant digits (no
+3.1100000000000003), the within/beyond-horizon fields only where a training window exists
+(the NSS; the chain has none, so its errors carry no such nulls), and the closed loop as
+the scene and plan once with one entry per plant under ``closed_loop.runs``
+(``{"kinematic": {...}, "chain": {...}}``): no plant's numbers at the top level.
+
 The run folder is claimed through :func:`parknss.outputs.run_folder`: the same demo
 (campaign, cell, NSS, chain) may run again into it, anything else there is refused unless
 ``overwrite``; every file is written atomically.
@@ -63,9 +69,49 @@ class DemoInputs:
     overwrite: bool = False
 
 
+HORIZON_KEYS: tuple[str, ...] = ("vx_mse_within_kmh2", "vx_mse_beyond_kmh2",
+                                  "yaw_mse_within_degs2", "yaw_mse_beyond_degs2", "horizon")
+
+
 def _errors(predictions, trials, horizon) -> dict:
-    logged, truth = logged_and_truth_errors(predictions, trials, horizon)
-    return {"logged": logged} if truth is None else {"logged": logged, "truth": truth}
+    """Errors against the logged (and truth) channels; without a training window (the
+    chain) the within/beyond-horizon split does not exist and its keys are left out."""
+    docs = dict(zip(("logged", "truth"),
+                    logged_and_truth_errors(predictions, trials, horizon), strict=True))
+    out = {}
+    for ref, e in docs.items():
+        if e is None:
+            continue
+        if horizon is None:
+            e = {k: v for k, v in e.items() if k not in HORIZON_KEYS}
+            e["counts"] = {k: n for k, n in e["counts"].items() if k not in ("within", "beyond")}
+        out[ref] = e
+    return out
+
+
+def tidy(value, digits: int = 6):
+    """``value`` with every float rounded to ``digits`` significant digits (nested dicts
+    and lists), for a summary people read."""
+    if isinstance(value, float):
+        return float(f"{value:.{digits}g}")
+    if isinstance(value, dict):
+        return {k: tidy(v, digits) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [tidy(v, digits) for v in value]
+    return value
+
+
+def closed_loop_doc(run) -> dict:
+    """The scene and plan once, then ``runs`` keyed by plant (:class:`SceneRun`'s JSON
+    without the first plant's fields at the top level)."""
+    full = run.to_json()
+    scene_keys = ("scene", "cell", "plannable", "plan_reason", "refined", "plan_s", "cusps",
+                  "planned_length_m")
+    doc = {k: full[k] for k in scene_keys}
+    doc["runs"] = {r["plant"]: {k: v for k, v in r.items() if k != "plant"}
+                   for r in full["runs"]}
+    doc["plan"] = full["plan"]
+    return doc
 
 
 def _require(path: Path, what: str) -> None:
@@ -118,9 +164,10 @@ def run_demo(inputs: DemoInputs, log: Say = _quiet, show: Say = _quiet) -> dict:
 
         log(f"4/4 closed loop: cell {inputs.cell} under the kinematic plant and the learned chain")
         run = simulate_scene(str(inputs.cell), ["kinematic", "chain"])
-        doc["closed_loop"] = run.to_json()
+        doc["closed_loop"] = closed_loop_doc(run)
         doc["figures"].update(draw_scene_run(run, out))
         doc["wall_s"] = round(time.perf_counter() - t0, 1)
+        doc = tidy(doc)
         folder.write_json("summary.json", doc, default=str)
     return doc
 
@@ -145,9 +192,9 @@ def summary_text(doc: dict) -> str:
                 lines.append(_line(f"{name} vs {ref} channels", e))
     cl = doc["closed_loop"]
     lines.append(f"closed loop, scene {cl['scene']} ({cl['cusps']} cusps):")
-    for r in cl["runs"]:
+    for plant, r in cl["runs"].items():
         lines.append(
-            f"  {r['plant']:<10} completed {r['completed']!s:<5} goal error "
+            f"  {plant:<10} completed {r['completed']!s:<5} goal error "
             f"{_num(r['goal_error_cm'], '.2f')} cm  heading "
             f"{_num(r['heading_error_deg'], '.2f')} deg  clearance "
             f"{_num(r['clearance_cm'], '.1f')} cm  duration {_num(r['duration_s'], '.1f')} s"

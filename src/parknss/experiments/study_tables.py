@@ -14,6 +14,11 @@ from parknss.experiments.limiter_study import LimiterResult
 from parknss.experiments.noise import SeedNoiseResult
 from parknss.experiments.results import Table
 
+VX = "vx [(km/h)²]"
+YAW = "ω_z [(°/s)²]"
+VX_TRUTH = "vx vs truth [(km/h)²]"
+REV_VX = "rev. vx [(km/h)²]"
+
 
 def _r(x: float, digits: int = 4) -> float | str:
     return "n/a" if x is None or not math.isfinite(x) else round(x, digits)
@@ -50,7 +55,8 @@ def learning_curve_tables(res: LearningCurveResult) -> list[Table]:
     return [
         Table(
             f"Learning curve ({res.epochs} epochs; fold means, power-law extrapolation)",
-            ["training trials", "r", "vx per fold", "vx mean", "ω_z mean", "vx mean vs truth"],
+            ["training trials", "r", "vx per fold [(km/h)²]", f"mean {VX}", f"mean {YAW}",
+             f"mean {VX_TRUTH}"],
             rows,
         ),
         Table("Power-law fits e(n) = a·n^-b of the fold means", ["channel", "a", "b"], fits),
@@ -76,7 +82,7 @@ def seed_noise_tables(res: SeedNoiseResult) -> list[Table]:
         Table(
             f"Seed-noise floor ({res.split} fold {res.index}, {res.epochs} epochs; paper "
             "CV about 2 % vx, 3-4 % yaw)",
-            ["seed", "vx", "ω_z", "vx vs truth", "best epoch", "wall [s]"],
+            ["seed", VX, YAW, VX_TRUTH, "best epoch", "wall [s]"],
             rows,
         )
     ]
@@ -127,16 +133,16 @@ def ablation_tables(res: AblationResult) -> list[Table]:
             [
                 "axis",
                 "option",
-                "vx",
-                "ω_z",
-                "vx vs truth",
+                VX,
+                YAW,
+                VX_TRUTH,
                 "effect vx / ω_z [%]",
                 "beyond floor",
                 "wall per fit [s]",
                 "wall s/epoch",
                 "CPU s/epoch",
                 "cost (CPU, else wall)",
-                "",
+                "setting",
             ],
             rows,
         )
@@ -145,7 +151,7 @@ def ablation_tables(res: AblationResult) -> list[Table]:
         tables.append(
             Table(
                 "LR sweep per option (fold-mean selection metric)",
-                ["axis", "option", "LR", "metric"],
+                ["axis", "option", "LR", "selection metric"],
                 sweeps,
             )
         )
@@ -169,7 +175,7 @@ def limiter_tables(res: LimiterResult) -> list[Table]:
         Table(
             f"Inference limiter on the same models (CV folds {res.folds}, {res.epochs} epochs; "
             f"{res.floor.describe()})",
-            ["limiter", "vx", "rev. vx", "ω_z", "vx change", "diverges"],
+            ["limiter", VX, REV_VX, YAW, "vx change", "diverges"],
             rows,
         )
     ]
@@ -183,7 +189,7 @@ def convergence_tables(res: ConvergenceResult) -> list[Table]:
     return [
         Table(
             f"Convergence probe ({res.split} fold {res.index}, cap {res.epoch_cap} epochs)",
-            ["optimum epoch", "best smoothed loss", "late variation", "vx", "ω_z"],
+            ["optimum epoch", "best smoothed loss", "late variation", VX, YAW],
             [
                 [
                     res.best_epoch,

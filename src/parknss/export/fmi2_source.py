@@ -6,7 +6,17 @@ chain (:meth:`~parknss.chain.realtime.RealtimeChain.start`) from the parameters,
 inputs at that moment filling the command histories and giving the first engaged gear.
 ``fmi2DoStep`` accepts any communication step that is a whole number n >= 1 of 10 ms
 (within 1e-9 s) and runs n chain samples under the inputs held over the step; the outputs
-after it are those of the last sample. The pose moves as the closed loop moves the chain
+after it are those of the last sample. ``gear`` and ``gear_engaged`` are FMI Integers
+(-1, 0, 1; another value is an fmi2Error), every other variable a Real with its unit.
+
+**The identified domain.** Each sample checks the commands against the chain's input
+domain (the envelope's clamp, :class:`~parknss.actuators.envelopes.Envelope`) and the
+predicted vx and yaw rate against the range of the data the NSS was identified on (its
+normaliser's clip range, widened by ``domain_margin`` of its span on each side,
+:class:`parknss.export.config.FmuConfig`). Outside it the output ``in_domain`` is 0 and
+``domain_exits`` counts the samples so far; the first sample of every excursion logs one
+fmi2Warning line naming the variable, its value, the range and what the chain does there
+(a command: clamped; a state: extrapolated). The pose moves as the closed loop moves the chain
 plant (:class:`parknss.sim.plants.ChainPlant`): along the exact arc
 (:func:`parknss.vehicle.arc_step`) at the mean of the previous and this sample's vx and
 yaw rate. The FMI headers are FMPy's (``fmpy/c-code``), never copied here.
@@ -19,51 +29,95 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Var:
-    """One FMI variable: value reference, name, causality, description (with its unit)."""
+    """One FMI variable: value reference, name, causality, description, unit (a name of
+    :data:`UNITS`; None: dimensionless), FMI type ("Real" or "Integer"), start value."""
 
     vr: int
     name: str
     causality: str
     description: str
     start: float | None = None
+    unit: str | None = None
+    type: str = "Real"
+
+
+UNITS: dict[str, tuple[dict[str, int], float]] = {
+    "N.m": ({"kg": 1, "m": 2, "s": -2}, 1.0),
+    "bar": ({"kg": 1, "m": -1, "s": -2}, 1.0e5),
+    "deg": ({"rad": 1}, 0.017453292519943295),
+    "m/s": ({"m": 1, "s": -1}, 1.0),
+    "m/s2": ({"m": 1, "s": -2}, 1.0),
+    "rad/s": ({"rad": 1, "s": -1}, 1.0),
+    "m": ({"m": 1}, 1.0),
+    "rad": ({"rad": 1}, 1.0),
+}
+"""The FMI unit definitions: SI base-unit exponents and the factor to SI."""
 
 
 INPUTS: tuple[Var, ...] = (
-    Var(0, "gear", "input", "gear request: -1 reverse, 0 neutral/park, 1 drive (NaN: hold)",
-        0.0),
-    Var(1, "torque_cmd", "input", "motor torque command, N.m", 0.0),
-    Var(2, "decel_cmd", "input", "deceleration command a_x* (<= 0), m/s2", 0.0),
-    Var(3, "steer_cmd", "input", "steering-wheel angle request, deg", 0.0),
+    Var(0, "gear", "input", "gear request: -1 reverse, 0 neutral/park, 1 drive", 0,
+        type="Integer"),
+    Var(1, "torque_cmd", "input", "motor torque command (NaN: hold)", 0.0, "N.m"),
+    Var(2, "decel_cmd", "input", "deceleration command a_x* (<= 0; NaN: hold)", 0.0, "m/s2"),
+    Var(3, "steer_cmd", "input", "steering-wheel angle request (NaN: hold)", 0.0, "deg"),
 )
 OUTPUTS: tuple[Var, ...] = (
-    Var(10, "torque", "output", "motor torque actual, N.m"),
-    Var(11, "brake_pressure", "output", "master-cylinder pressure, bar"),
-    Var(12, "steer", "output", "steering-wheel angle actual, deg"),
-    Var(13, "vx", "output", "longitudinal velocity (signed), m/s"),
-    Var(14, "yaw_rate", "output", "yaw rate, rad/s"),
-    Var(15, "ax", "output", "longitudinal acceleration (IMU), m/s2"),
-    Var(16, "ay", "output", "lateral acceleration (IMU), m/s2"),
-    Var(17, "gear_engaged", "output", "engaged gear (the shift-by-wire rule)"),
-    Var(18, "x", "output", "rear-axle position x, m"),
-    Var(19, "y", "output", "rear-axle position y, m"),
-    Var(20, "heading", "output", "heading (not wrapped), rad"),
+    Var(10, "torque", "output", "motor torque actual", unit="N.m"),
+    Var(11, "brake_pressure", "output", "master-cylinder pressure", unit="bar"),
+    Var(12, "steer", "output", "steering-wheel angle actual", unit="deg"),
+    Var(13, "vx", "output", "longitudinal velocity (signed)", unit="m/s"),
+    Var(14, "yaw_rate", "output", "yaw rate", unit="rad/s"),
+    Var(15, "ax", "output", "longitudinal acceleration (IMU)", unit="m/s2"),
+    Var(16, "ay", "output", "lateral acceleration (IMU)", unit="m/s2"),
+    Var(17, "gear_engaged", "output", "engaged gear (the shift-by-wire rule)", type="Integer"),
+    Var(18, "x", "output", "rear-axle position x", unit="m"),
+    Var(19, "y", "output", "rear-axle position y", unit="m"),
+    Var(20, "heading", "output", "heading (not wrapped)", unit="rad"),
+    Var(21, "in_domain", "output", "1 while the commands and vx, yaw rate are inside the "
+        "identified domain, else 0", type="Integer"),
+    Var(22, "domain_exits", "output", "samples so far outside the identified domain",
+        type="Integer"),
 )
 PARAMETERS: tuple[Var, ...] = (
-    Var(30, "vx0", "parameter", "initial longitudinal velocity, m/s", 0.0),
-    Var(31, "yaw_rate0", "parameter", "initial yaw rate, rad/s", 0.0),
-    Var(32, "torque0", "parameter", "initial motor torque, N.m", 0.0),
-    Var(33, "brake_pressure0", "parameter", "initial brake pressure, bar", 0.0),
-    Var(34, "steer0", "parameter", "initial steering-wheel angle, deg", 0.0),
-    Var(35, "x0", "parameter", "initial rear-axle x, m", 0.0),
-    Var(36, "y0", "parameter", "initial rear-axle y, m", 0.0),
-    Var(37, "heading0", "parameter", "initial heading, rad", 0.0),
+    Var(30, "vx0", "parameter", "initial longitudinal velocity", 0.0, "m/s"),
+    Var(31, "yaw_rate0", "parameter", "initial yaw rate", 0.0, "rad/s"),
+    Var(32, "torque0", "parameter", "initial motor torque", 0.0, "N.m"),
+    Var(33, "brake_pressure0", "parameter", "initial brake pressure", 0.0, "bar"),
+    Var(34, "steer0", "parameter", "initial steering-wheel angle", 0.0, "deg"),
+    Var(35, "x0", "parameter", "initial rear-axle x", 0.0, "m"),
+    Var(36, "y0", "parameter", "initial rear-axle y", 0.0, "m"),
+    Var(37, "heading0", "parameter", "initial heading", 0.0, "rad"),
 )
 VARIABLES: tuple[Var, ...] = (*INPUTS, *OUTPUTS, *PARAMETERS)
 
 
-def wrapper_source(guid: str) -> str:
+INTEGER_VRS: tuple[int, ...] = tuple(v.vr for v in VARIABLES if v.type == "Integer")
+
+
+@dataclass(frozen=True)
+class Domain:
+    """The identified domain the wrapper checks (see the module doc): command bounds
+    [torque_cmd N.m, decel_cmd m/s², steer_cmd deg] and state bounds [vx m/s, yaw rad/s]."""
+
+    cmd_lo: tuple[float, float, float]
+    cmd_hi: tuple[float, float, float]
+    state_lo: tuple[float, float]
+    state_hi: tuple[float, float]
+
+
+def _c(x: float) -> str:
+    return repr(float(x)) if abs(x) != float("inf") else ("HUGE_VAL" if x > 0 else "-HUGE_VAL")
+
+
+def wrapper_source(guid: str, domain: Domain) -> str:
     """The C of the FMI 2.0 co-simulation interface for the chain with ``guid``."""
-    return _WRAPPER.replace("@GUID@", guid)
+    lo = [*domain.cmd_lo, *domain.state_lo]
+    hi = [*domain.cmd_hi, *domain.state_hi]
+    ints = " || ".join(f"vr == {v}" for v in INTEGER_VRS)
+    return (_WRAPPER.replace("@GUID@", guid)
+            .replace("@DOM_LO@", ", ".join(_c(x) for x in lo))
+            .replace("@DOM_HI@", ", ".join(_c(x) for x in hi))
+            .replace("@IS_INT@", ints))
 
 
 _WRAPPER = r"""/* FMI 2.0 co-simulation wrapper of the parknss chain (parknss.export). */
@@ -79,6 +133,12 @@ _WRAPPER = r"""/* FMI 2.0 co-simulation wrapper of the parknss chain (parknss.ex
 #define DT_STEP 0.01
 #define N_VR 40
 
+/* the identified domain: torque_cmd, decel_cmd, steer_cmd, vx, yaw rate */
+static const double DOM_LO[5] = {@DOM_LO@};
+static const double DOM_HI[5] = {@DOM_HI@};
+static const char *DOM_NAME[5] = {"torque_cmd", "decel_cmd", "steer_cmd", "vx", "yaw_rate"};
+static const char *DOM_UNIT[5] = {"N.m", "m/s2", "deg", "m/s", "rad/s"};
+
 typedef struct {
     pk_chain chain;
     fmi2CallbackFunctions cb;
@@ -86,6 +146,8 @@ typedef struct {
     fmi2Boolean logging;
     double v[N_VR];        /* every variable by value reference */
     double prev_vx, prev_yaw;
+    long samples;          /* samples run since the start */
+    int outside[5];        /* inside an excursion of each domain variable */
     int initialised;
 } Instance;
 
@@ -101,12 +163,33 @@ static void logmsg(Instance *c, fmi2Status st, const char *cat, const char *fmt,
 }
 
 static int known(fmi2ValueReference vr) {
-    return vr <= 3 || (vr >= 10 && vr <= 20) || (vr >= 30 && vr <= 37);
+    return vr <= 3 || (vr >= 10 && vr <= 22) || (vr >= 30 && vr <= 37);
 }
+
+static int is_integer(fmi2ValueReference vr) { return @IS_INT@; }
 
 static void defaults(Instance *c) {
     memset(c->v, 0, sizeof c->v);
+    memset(c->outside, 0, sizeof c->outside);
+    c->samples = 0;
     c->initialised = 0;
+}
+
+/* in_domain / domain_exits, one warning line at the start of each excursion */
+static void check_domain(Instance *c, const double val[5]) {
+    int inside = 1;
+    for (int i = 0; i < 5; ++i) {
+        int out = !isnan(val[i]) && (val[i] < DOM_LO[i] || val[i] > DOM_HI[i]);
+        if (out && !c->outside[i])
+            logmsg(c, fmi2Warning, "domain",
+                   "t = %.2f s: %s = %g %s outside the identified domain [%g, %g]: %s",
+                   c->samples * DT_STEP, DOM_NAME[i], val[i], DOM_UNIT[i], DOM_LO[i],
+                   DOM_HI[i], i < 3 ? "clamped to it" : "the chain extrapolates");
+        c->outside[i] = out;
+        inside = inside && !out;
+    }
+    c->v[21] = inside;
+    if (!inside) c->v[22] += 1.0;
 }
 
 static void arc_step(double *x, double *y, double *h, double ds, double dh) {
@@ -126,6 +209,7 @@ static void start(Instance *c) {
     c->v[13] = x0[0]; c->v[14] = x0[1]; c->v[15] = 0.0; c->v[16] = 0.0;
     c->v[17] = c->chain.gear;
     c->v[18] = c->v[35]; c->v[19] = c->v[36]; c->v[20] = c->v[37];
+    c->v[21] = 1.0; c->v[22] = 0.0;
     c->prev_vx = x0[0];
     c->prev_yaw = x0[1];
     c->initialised = 1;
@@ -139,6 +223,9 @@ static void sample(Instance *c) {
     c->prev_vx = out[3];
     c->prev_yaw = out[4];
     arc_step(&c->v[18], &c->v[19], &c->v[20], mv * DT_STEP, mw * DT_STEP);
+    double dom[5] = {cmd[1], cmd[2], cmd[3], out[3], out[4]};
+    check_domain(c, dom);
+    c->samples += 1;
 }
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
@@ -184,8 +271,10 @@ fmi2Status fmi2Reset(fmi2Component c) { defaults((Instance *)c); return fmi2OK; 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     Instance *s = (Instance *)c;
     for (size_t i = 0; i < n; ++i) {
-        if (!known(vr[i])) { logmsg(s, fmi2Error, "error", "unknown value reference %u", vr[i]);
-                             return fmi2Error; }
+        if (!known(vr[i]) || is_integer(vr[i])) {
+            logmsg(s, fmi2Error, "error", "no Real with value reference %u", vr[i]);
+            return fmi2Error;
+        }
         v[i] = s->v[vr[i]];
     }
     return fmi2OK;
@@ -196,6 +285,10 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     Instance *s = (Instance *)c;
     for (size_t i = 0; i < n; ++i) {
         fmi2ValueReference r = vr[i];
+        if (is_integer(r)) {
+            logmsg(s, fmi2Error, "error", "value reference %u is an Integer", r);
+            return fmi2Error;
+        }
         if (r <= 3 || (r >= 30 && r <= 37 && !s->initialised)) { s->v[r] = v[i]; continue; }
         logmsg(s, fmi2Error, "error", "value reference %u cannot be set now", r);
         return fmi2Error;
@@ -210,7 +303,16 @@ static fmi2Status none(fmi2Component c, const char *what) {
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           fmi2Integer v[]) {
-    (void)vr; (void)v; return n ? none(c, "integers") : fmi2OK; }
+    Instance *s = (Instance *)c;
+    for (size_t i = 0; i < n; ++i) {
+        if (!is_integer(vr[i])) {
+            logmsg(s, fmi2Error, "error", "no Integer with value reference %u", vr[i]);
+            return fmi2Error;
+        }
+        v[i] = (fmi2Integer)lround(s->v[vr[i]]);
+    }
+    return fmi2OK;
+}
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           fmi2Boolean v[]) {
     (void)vr; (void)v; return n ? none(c, "booleans") : fmi2OK; }
@@ -219,7 +321,20 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     (void)vr; (void)v; return n ? none(c, "strings") : fmi2OK; }
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           const fmi2Integer v[]) {
-    (void)vr; (void)v; return n ? none(c, "integers") : fmi2OK; }
+    Instance *s = (Instance *)c;
+    for (size_t i = 0; i < n; ++i) {
+        if (vr[i] != 0) {
+            logmsg(s, fmi2Error, "error", "Integer value reference %u cannot be set", vr[i]);
+            return fmi2Error;
+        }
+        if (v[i] < -1 || v[i] > 1) {
+            logmsg(s, fmi2Error, "error", "gear %d: expected -1, 0 or 1", (int)v[i]);
+            return fmi2Error;
+        }
+        s->v[0] = (double)v[i];
+    }
+    return fmi2OK;
+}
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           const fmi2Boolean v[]) {
     (void)vr; (void)v; return n ? none(c, "booleans") : fmi2OK; }

@@ -13,7 +13,8 @@ from parknss.outputs import write_text_atomic
 _CSS = """
 body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}
 table{border-collapse:collapse;margin:0.5em 0 1.5em}td,th{border:1px solid #ccc;padding:3px 8px;
-text-align:right}th{background:#f3f3f3}td:first-child,th:first-child{text-align:left}
+text-align:left;vertical-align:top}th{background:#f3f3f3}td.num{text-align:right}
+table.findings td{max-width:34em}
 img{max-width:100%;border:1px solid #eee}.yes{color:#060}.no{color:#a00}.na{color:#777}
 pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555}
 .smoke{background:#fff3cd;padding:.6em;border:1px solid #e0c36c}
@@ -21,16 +22,15 @@ pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:12px}.note{color:#555
 
 
 def _cell(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return html.escape(str(v))
+    """One table cell: numbers right-aligned (4 significant digits), text left-aligned."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return f"<td>{html.escape(str(v))}</td>"
+    return f"<td class='num'>{v:.4g}</td>" if isinstance(v, float) else f"<td class='num'>{v}</td>"
 
 
 def _table(t) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in t.columns)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in row) + "</tr>" for row in t.rows
-    )
+    body = "".join("<tr>" + "".join(_cell(c) for c in row) + "</tr>" for row in t.rows)
     return f"<h3>{html.escape(t.title)}</h3><table><tr>{head}</tr>{body}</table>"
 
 
@@ -39,12 +39,13 @@ def _figure(path: Path) -> str:
     return f'<p><img alt="{html.escape(Path(path).name)}" src="data:image/png;base64,{data}"></p>'
 
 
-def _finding_row(f) -> str:
+def _finding_row(f, art) -> str:
+    """A finding, what was measured, the verdict, and a link to the section it comes from."""
     cls = {True: "yes", False: "no", None: "na"}[f.agrees]
-    word = f.verdict
     return (
         f"<tr><td>{html.escape(f.claim)}</td><td>{html.escape(f.measured)}</td>"
-        f'<td class="{cls}">{word}</td></tr>'
+        f'<td class="{cls}">{html.escape(f.verdict)}</td>'
+        f"<td><a href='#{html.escape(art.name)}'>{html.escape(art.title)}</a></td></tr>"
     )
 
 
@@ -65,12 +66,12 @@ def write_report(
             "budget (a few epochs of a tiny net): it shows that every study runs end to "
             "end; its numbers support no verdict on the paper's findings.</p>"
         )
-    findings = [f for _, res in sections for f in res.findings]
-    if findings:
-        rows = "".join(_finding_row(f) for f in findings)
+    rows = "".join(_finding_row(f, art) for art, res in sections for f in res.findings)
+    if rows:
         parts.append(
-            "<h2>The paper's findings beside this run</h2><table><tr><th>paper</th>"
-            f"<th>measured here</th><th>verdict</th></tr>{rows}</table>"
+            "<h2>The paper's findings beside this run</h2><table class='findings'><tr>"
+            "<th>paper</th><th>measured here</th><th>verdict</th><th>section</th></tr>"
+            f"{rows}</table>"
         )
     for art, res in sections:
         parts.append(

@@ -78,7 +78,8 @@ def draw_states(
     """Fig. 9: vx [km/h], ω_z [°/s], ax and ay [m/s²] of each plant on one time axis.
 
     ax and ay are shown with a centred moving average of ``smooth_s`` seconds; reverse
-    gear of the first run is shaded. Returns the PNG path.
+    gear of the first run is shaded, and the legend says so ("reverse gear (<plant>)").
+    Returns the PNG path.
     """
     fig, axes = plt.subplots(4, 1, figsize=(10, 9), sharex=True)
     n = max(1, round(smooth_s / dt))
@@ -102,7 +103,14 @@ def draw_states(
             )
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=8)
+    if first is not None and np.any(np.asarray(first["gear"]) < -0.5):
+        from matplotlib.patches import Patch
+
+        axes[0].add_artist(axes[0].legend(loc="upper right", fontsize=8))
+        axes[0].legend(handles=[Patch(color="0.85", label=f"reverse gear ({next(iter(runs))})")],
+                       loc="upper left", fontsize=8)
+    else:
+        axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("t [s]")
     if title:
         axes[0].set_title(title)
