@@ -181,14 +181,14 @@ def _commands(tmp_path: Path, out: Path) -> list[list[str]]:
 def no_work(monkeypatch):
     """The work of each command fails the test if it starts (the refusal comes first)."""
     import parknss.experiments.evaluate as evaluate
-    import parknss.experiments.scenes as scenes
     import parknss.export.onnx_step as onnx_step
     import parknss.reference.campaign as ref_campaign
+    import parknss.sim.planner as planner
 
     def started(*_a, **_k):
         raise AssertionError("the work started before --out was checked")
 
-    monkeypatch.setattr(scenes, "plan_named_scene", started)
+    monkeypatch.setattr(planner, "plan_named_scene", started)  # imported where used
     monkeypatch.setattr(onnx_step, "step_module", started)
     monkeypatch.setattr(ref_campaign, "generate_campaign", started)
     monkeypatch.setattr(data_io, "import_folder", started)

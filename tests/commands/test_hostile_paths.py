@@ -58,10 +58,12 @@ def world(tmp_path, monkeypatch):
     def no_planning(*_a, **_k):
         raise AssertionError("planning started before the name was checked")
 
-    import parknss.experiments.scenes as scenes
+    import parknss.sim.planner as planner
+    import parknss.sim.session as session
 
-    monkeypatch.setattr(scenes, "plan_named_scene", no_planning)
-    monkeypatch.setattr(scenes, "simulate_scene", no_planning)
+    # experiments.scenes imports them where used (fast start-up): patch their homes
+    monkeypatch.setattr(planner, "plan_named_scene", no_planning)
+    monkeypatch.setattr(session, "simulate_scene", no_planning)
     return tmp_path, work
 
 

@@ -81,9 +81,10 @@ def test_a_killed_fit_parks_and_finishes_elsewhere_as_if_never_stopped(killed, t
     outcomes = parked.park_run(run_a, root)
     assert [o.parked.step for o in outcomes] == [2]
     assert (root / parked.INFLIGHT / key / train_state.META).is_file()
-    there = root / parked.INFLIGHT / key  # one generation, what git carries
+    there = root / parked.INFLIGHT / key  # one generation (and its sittings), what git carries
     assert sorted(p.name for p in there.iterdir()) == sorted(
-        [parked.JOB_FILE, train_state.META, train_state.tensors_path(there).name])
+        [parked.JOB_FILE, train_state.META, train_state.tensors_path(there).name,
+         parked.SITTINGS])
     assert parked.listing(root) == ([f"inflight/{key}  {outcomes[0].parked.line()}  "
                                      "(unfinished)"], [])
     # parking again the same state adds nothing

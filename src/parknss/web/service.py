@@ -100,6 +100,7 @@ class SimulatorService:
         self.interface = load_interface_config(cfg.interface_config)
         self.cache = PlanCache(cfg.plan_cache_size)
         self._plan_lock = threading.Lock()
+        self._plants: tuple[tuple, list[PlantInfo]] | None = None  # (files' stats, answer)
 
     # -- catalogue ----------------------------------------------------------------------
 
@@ -114,8 +115,26 @@ class SimulatorService:
             steer_ratio=g.steer_ratio,
         )
 
+    def _chain_stamp(self) -> tuple:
+        """(name, size, mtime) of every file of the chain artefact: what decides whether the
+        chain plant can be built, cheap to read (no hashing, no loading)."""
+        from parknss.config import SHIPPED_CHAIN
+
+        root = Path(self.closed_loop.chain_path or SHIPPED_CHAIN)
+        try:
+            files = sorted(p for p in root.rglob("*") if p.is_file())
+            return tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
+        except OSError:
+            return ("unreadable",)
+
     def plant_info(self) -> list[PlantInfo]:
-        """Every plant kind and whether it can be built here (the chain may be missing)."""
+        """Every plant kind and whether it can be built here (the chain may be missing).
+        Building the chain verifies and loads its artefact (~0.1 s and more while a large
+        request holds the interpreter), so the answer is kept until a file of the
+        artefact changes (:meth:`_chain_stamp`): /api/health stays instant."""
+        stamp = self._chain_stamp()
+        if self._plants is not None and self._plants[0] == stamp:
+            return list(self._plants[1])
         out = []
         for kind in PLANT_KINDS:
             colour = self.cfg.plant_colours.get(kind, "#34495e")
@@ -124,7 +143,8 @@ class SimulatorService:
                 out.append(PlantInfo(kind=kind, available=True, colour=colour))
             except PlantUnavailableError as exc:
                 out.append(PlantInfo(kind=kind, available=False, reason=str(exc), colour=colour))
-        return out
+        self._plants = (stamp, out)
+        return list(out)
 
     def health(self) -> Health:
         return Health(
