@@ -195,13 +195,17 @@ def _write_python_can(path: str | Path, frames: FrameTable, writer_name: str) ->
     import can
 
     p = Path(path)
-    writer = getattr(can, writer_name)(str(p))
+    _feed(getattr(can, writer_name)(str(p)), frames)
+    return p
+
+
+def _feed(writer, frames: FrameTable) -> None:
+    """Every frame into an open python-can writer, which is stopped (file closed) after."""
     try:
         for msg in _can_messages(frames):
             writer.on_message_received(msg)
     finally:
         writer.stop()
-    return p
 
 
 def write_blf(path: str | Path, frames: FrameTable) -> Path:
@@ -228,11 +232,7 @@ def write_trc(path: str | Path, frames: FrameTable, version: str = "2.1") -> Pat
     p = Path(path)
     writer = can.TRCWriter(str(p))
     writer.file_version = versions[version]
-    try:
-        for msg in _can_messages(frames):
-            writer.on_message_received(msg)
-    finally:
-        writer.stop()
+    _feed(writer, frames)
     return p
 
 
