@@ -38,6 +38,7 @@ def _emit(doc: dict, as_json: bool, text) -> None:
 
 def register(app: typer.Typer) -> None:
     sub = typer.Typer(help="Actuator submodels, selection, co-tuning, the chain (§III, §V-E).",
+                      short_help="Actuator submodels, selection, the chain.",
                       no_args_is_help=True)
     app.add_typer(sub, name="actuators")
     nss_opt = typer.Option(None, "--nss", help="NSS model folder (default models/nss).")
@@ -47,7 +48,7 @@ def register(app: typer.Typer) -> None:
     sel_opt = typer.Option(None, "--selection", help="selection.json of a study (skips A/B).")
     over_opt = typer.Option(False, "--overwrite", help="Replace a chain already in the folder.")
 
-    @sub.command("study")
+    @sub.command("study", short_help="Phase A/B selection and co-tuning (Figs. 3, 6).")
     def study(
         nss: Path | None = nss_opt, data: Path | None = data_opt,
         out: Path = typer.Option(DEFAULT_OUT / "study", "--out", help="Output folder."),
@@ -70,7 +71,7 @@ def register(app: typer.Typer) -> None:
                              fanout=Fanout(executor, workers, address), overwrite=overwrite)
         _emit(run_actuator_study(inputs, _log), as_json, study_text)
 
-    @sub.command("ladder")
+    @sub.command("ladder", short_help="Table IV: every row measured on every trial.")
     def ladder(
         nss: Path | None = nss_opt, data: Path | None = data_opt,
         selection: Path | None = sel_opt, config: Path | None = cfg_opt,
@@ -85,7 +86,7 @@ def register(app: typer.Typer) -> None:
                              out=save, monolithic=True, overwrite=overwrite, command="ladder")
         _emit(run_build(inputs, _log), as_json, ladder_text)
 
-    @sub.command("build")
+    @sub.command("build", short_help="Select, fit, co-tune and write the chain.")
     def build(
         nss: Path = typer.Option(..., "--nss", help="NSS model folder."),
         out: Path = typer.Option(..., "--out", help="Chain artefact folder to write."),
@@ -100,7 +101,7 @@ def register(app: typer.Typer) -> None:
                              overwrite=overwrite)
         _emit(run_build(inputs, _log), as_json, ladder_text)
 
-    @sub.command("stress")
+    @sub.command("stress", short_help="Envelope stress study of the chain.")
     def stress(
         chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/chain)."),
         data: Path | None = data_opt, config: Path | None = cfg_opt, as_json: bool = json_opt,

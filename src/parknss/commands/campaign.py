@@ -25,10 +25,11 @@ class Condition(StrEnum):
 
 def register(app: typer.Typer) -> None:
     sub = typer.Typer(
-        help="Generate, describe and import field-test campaigns.", no_args_is_help=True
+        help="Generate, describe and import field-test campaigns.", no_args_is_help=True,
+        short_help="Generate, describe and import campaigns."
     )
 
-    @sub.command("generate")
+    @sub.command("generate", short_help="Generate the synthetic 16-trial campaign.")
     def generate(
         out: Path = typer.Option(..., "--out", help="Folder to write the campaign to."),
         seed: int = typer.Option(0, "--seed", help="Seed of the repetition perturbations."),
@@ -49,7 +50,7 @@ def register(app: typer.Typer) -> None:
         write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"wrote {len(campaign)} trials to {out}", err=True)
 
-    @sub.command("describe")
+    @sub.command("describe", short_help="Per-trial summary and physics checks.")
     def describe(
         path: Path = typer.Argument(..., help="Campaign folder."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
@@ -66,7 +67,7 @@ def register(app: typer.Typer) -> None:
         else:
             typer.echo("\n".join([summary.table(), *conditions_rows(conds)]))
 
-    @sub.command("import")
+    @sub.command("import", short_help="Turn a folder of real logs into a campaign.")
     def import_(
         src: Path = typer.Argument(..., help="Folder of logs, one file per trial."),
         out: Path = typer.Option(..., "--out", help="Campaign folder to write."),

@@ -21,7 +21,7 @@ def _log(msg: str) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("demo")
+    @app.command("demo", short_help="Describe, evaluate, rate and park the shipped plant.")
     def demo(
         out: Path = typer.Option(Path("runs/demo"), "--out", help="Run folder."),
         data: Path | None = typer.Option(

@@ -21,12 +21,13 @@ import typer
 
 def register(app: typer.Typer) -> None:
     sub = typer.Typer(help="The learned plant outside parknss: FMU and ONNX.",
+                      short_help="The learned plant as an FMU or ONNX graph.",
                       no_args_is_help=True)
     app.add_typer(sub, name="export")
     json_opt = typer.Option(False, "--json", help="Print one JSON document.")
     over_opt = typer.Option(False, "--overwrite", help="Replace an existing file.")
 
-    @sub.command("fmu")
+    @sub.command("fmu", short_help="FMI 2.0 co-simulation FMU of the chain.")
     def fmu(
         out: Path = typer.Option(..., "--out", help="FMU file to write (.fmu)."),
         chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/chain)."),
@@ -61,7 +62,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"FMPy vs real-time chain over {len(doc['verify'])} trials: "
                        f"largest difference {doc['verify_worst']:.3g}")
 
-    @sub.command("onnx")
+    @sub.command("onnx", short_help="One 10 ms step as an ONNX graph.")
     def onnx(
         out: Path = typer.Option(..., "--out", help="ONNX file to write (.onnx)."),
         model: Path | None = typer.Option(None, "--model", help="NSS model folder."),

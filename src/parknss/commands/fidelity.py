@@ -25,7 +25,7 @@ from parknss.commands.simulate import (
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("fidelity")
+    @app.command("fidelity", short_help="The chain against the truth in closed loop.")
     def fidelity(
         grid: str | None = typer.Option(None, "--grid", help="36, 12 or 252."),
         cells: str | None = typer.Option(None, "--cells", help="Grid subset, e.g. 0-5,9."),

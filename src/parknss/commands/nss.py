@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
         False, "--overwrite", help="Replace what --out holds (another run, an artefact)."
     )
 
-    @app.command("cv")
+    @app.command("cv", short_help="Table II: 4-fold CV of the NSS and two baselines.")
     def cv(
         data: Path | None = data_opt, config: Path | None = config_opt,
         epochs: int | None = epochs_opt, seed: int | None = seed_opt,
@@ -72,7 +72,7 @@ def register(app: typer.Typer) -> None:
         res, doc = table2(inputs, _log)
         _emit(doc, as_json, res.table())
 
-    @app.command("train")
+    @app.command("train", short_help="The deployment fit of the NSS on every trial.")
     def train(
         data: Path | None = data_opt, config: Path | None = config_opt,
         epochs: int | None = epochs_opt, seed: int | None = seed_opt,
@@ -95,7 +95,7 @@ def register(app: typer.Typer) -> None:
         doc, text = train_deployment(inputs)
         _emit(doc, as_json, text)
 
-    @app.command("evaluate")
+    @app.command("evaluate", short_help="Open-loop errors over whole trials (Fig. 5).")
     def evaluate(
         model: Path | None = typer.Option(
             None, "--model", help="NSS model folder (default: shipped)."

@@ -29,7 +29,7 @@ def _log(msg: str) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("plan")
+    @app.command("plan", short_help="Plan one parking scene or a scenario grid.")
     def plan(
         scene: str | None = typer.Option(
             None, "--scene", help="Scene JSON, TPCAP .csv, CommonRoad .xml, cell 0-35, robust:N."

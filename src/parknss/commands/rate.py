@@ -23,7 +23,7 @@ def _log(msg: str) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("rate")
+    @app.command("rate", short_help="ISO/TS 18571 rating of vx, yaw rate, ax, ay.")
     def rate(
         data: Path = typer.Option(..., "--data", help="Campaign folder (campaign.json)."),
         model: Path | None = typer.Option(None, "--model", help="Model checkpoint to rate."),

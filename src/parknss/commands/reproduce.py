@@ -14,7 +14,7 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("reproduce")
+    @app.command("reproduce", short_help="The paper's tables and figures; HTML report.")
     def reproduce(
         name: str = typer.Argument("all", help="Artefact name, or 'all'."),
         list_: bool = typer.Option(False, "--list", help="List the artefacts and exit."),

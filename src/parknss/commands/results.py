@@ -18,6 +18,7 @@ from parknss.errors import ParknssError
 def register(app: typer.Typer) -> None:
     results_app = typer.Typer(help="The result store: list and verify stored fits, park "
                               "unfinished ones.",
+                              short_help="The result store of study fits.",
                               no_args_is_help=True)
     app.add_typer(results_app, name="results")
     store_opt = typer.Option(None, "--store", help="Result store folder (default: results/).")
@@ -26,7 +27,7 @@ def register(app: typer.Typer) -> None:
 
     add_commands(results_app, store_opt, config_opt)
 
-    @results_app.command("list")
+    @results_app.command("list", short_help="One line per stored fit.")
     def list_cmd(
         store: str | None = store_opt,
         config: Path | None = config_opt,
@@ -53,7 +54,7 @@ def register(app: typer.Typer) -> None:
                    f"{describe(root, code_version())}"
                    + (f"; {len(bad)} invalid files (parknss results verify)" if bad else ""))
 
-    @results_app.command("verify")
+    @results_app.command("verify", short_help="Check every stored file and parked state.")
     def verify_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:
         """Check every stored file: it parses, its key matches its contents and path, its
         content matches its digest; every parked state reads whole and sits under its own
@@ -80,7 +81,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"{stale} fits are of a code version not accepted here (stale): "
                        "parknss results migrate checks whether this code computes their numbers")
 
-    @results_app.command("park")
+    @results_app.command("park", short_help="Copy unfinished fits' states into the store.")
     def park_cmd(
         out: Path = typer.Argument(..., help="A parknss reproduce or study run folder."),
         store: str | None = store_opt,

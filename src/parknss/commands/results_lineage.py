@@ -15,7 +15,7 @@ from parknss.errors import ParknssError
 
 
 def add_commands(results_app: typer.Typer, store_opt, config_opt) -> None:
-    @results_app.command("canary")
+    @results_app.command("canary", short_help="Run the canary fits; print their digest.")
     def canary_cmd(
         store: str | None = store_opt,
         config: Path | None = config_opt,
@@ -53,7 +53,7 @@ def add_commands(results_app: typer.Typer, store_opt, config_opt) -> None:
             add_canary(rec, can)
             typer.echo(f"recorded in {write_record(root, rec)}")
 
-    @results_app.command("migrate")
+    @results_app.command("migrate", short_help="Keep older fits when the canary matches.")
     def migrate_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:
         """Run the canary under this code; where it equals an older version's on this CPU
         model, record this version equivalent to it (the store then keeps its fits)."""
@@ -70,7 +70,7 @@ def add_commands(results_app: typer.Typer, store_opt, config_opt) -> None:
                                "one on this CPU: this code changes the numbers, the stored "
                                "fits of other versions stay stale (recorded in lineage/)")
 
-    @results_app.command("seal")
+    @results_app.command("seal", short_help="Digest entries stored without one.")
     def seal_cmd(store: str | None = store_opt, config: Path | None = config_opt) -> None:
         """Add a content digest to every entry stored without one (once, for old stores)."""
         from parknss.experiments.store import results_root, seal

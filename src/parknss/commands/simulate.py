@@ -39,7 +39,7 @@ def _files(*paths: Path | None) -> SimConfigFiles:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("simulate")
+    @app.command("simulate", short_help="One planned scene in closed loop (Figs. 8, 9).")
     def simulate(
         scene: str = typer.Option(
             ..., "--scene", help="Scene JSON, TPCAP .csv, CommonRoad .xml, cell 0-35, robust:N."
@@ -70,7 +70,7 @@ def register(app: typer.Typer) -> None:
         doc = simulate_one(scene, plants, files, out=out, series=series, overwrite=overwrite)
         typer.echo(json.dumps(doc, indent=2) if as_json else summary_text(doc))
 
-    @app.command("grid")
+    @app.command("grid", short_help="A scenario grid in closed loop (Table V).")
     def grid(
         grid: str = typer.Option("36", "--grid", help="36, 12 (tuning core) or 252."),
         plants: str = typer.Option("kinematic,reference", "--plants", help="Comma list."),
@@ -104,7 +104,7 @@ def register(app: typer.Typer) -> None:
             f" (x{doc['realtime_factor_wall']} real time overall); CSV {doc['csv']}"
         )
 
-    @app.command("tune")
+    @app.command("tune", short_help="Tune the interface gains on the 12-cell core.")
     def tune(
         plant: str | None = typer.Option(None, "--plant", help="Default: chain, else reference."),
         workers: int = WORKERS,

@@ -31,6 +31,7 @@ def _log(msg: str) -> None:
 def register(app: typer.Typer) -> None:
     study_app = typer.Typer(
         help="Evaluation studies: learning curve, seed noise, ablations, limiter, convergence.",
+        short_help="The paper's evaluation studies, resumable.",
         no_args_is_help=True,
     )
     app.add_typer(study_app, name="study")
@@ -87,9 +88,9 @@ def register(app: typer.Typer) -> None:
         return command
 
     for name in STUDIES:
-        study_app.command(name)(_make(name))
+        study_app.command(name, short_help=f"Run the {name} study.")(_make(name))
 
-    @study_app.command("progress")
+    @study_app.command("progress", short_help="How far each fit of a run folder has got.")
     def progress_cmd(
         out: Path = typer.Argument(..., help="Run folder of parknss reproduce or study."),
         as_json: bool = json_opt,
@@ -110,7 +111,7 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"{len(rows) - queued} fits with a training state, {done} done"
                    + (f", {queued} queued" if queued else ""))
 
-    @study_app.command("estimate")
+    @study_app.command("estimate", short_help="Fits per study: stored, parked, CPU hours left.")
     def estimate_cmd(
         quick: bool = quick_opt, config: Path | None = config_opt, data: Path | None = data_opt,
         sec_per_epoch: float | None = typer.Option(

@@ -20,7 +20,7 @@ def _log(msg: str) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("web")
+    @app.command("web", short_help="Serve the parking simulator in the browser.")
     def web(
         host: str | None = typer.Option(None, "--host", help="Bind address (web.yaml: 127.0.0.1)."),
         port: int | None = typer.Option(None, "--port", help="TCP port (web.yaml: 8000)."),
