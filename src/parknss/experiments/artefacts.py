@@ -345,7 +345,8 @@ def table4_artefact(ctx: RunContext) -> ArtefactResult:
 
         fanout = Fanout(ctx.executor, ctx.workers or 1, ctx.address)
         doc = run_build(BuildInputs(nss=SHIPPED_NSS, data=ctx.data, monolithic=True,
-                                         fanout=fanout))
+                                         fanout=fanout),
+                        lambda msg: ctx.log(f"[reproduce] table4: {msg}"))  # minutes: say so
         source = "measured now by `parknss actuators ladder` on the shipped NSS"
     from parknss.chain.ladder import LADDER_ROWS
 

@@ -96,6 +96,7 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
         data=inputs.data,
         cache_dir=out / "cache",
         config=inputs.config,
+        log=log,
     )
     ctx.store = open_store(inputs.store, ctx.experiments_config(), quick, inputs.refit,
                            stored_only=inputs.stored_only)

@@ -75,7 +75,8 @@ class RunContext:
     config: the studies' YAML (None: configs/experiments.yaml); memo: results shared
     between artefacts of one run (the config, the measured noise floor); store: the result
     store (:class:`~parknss.experiments.store.ResultStore`, None: none); tally: where the
-    fits came from (run cache, store, fitted).
+    fits came from (run cache, store, fitted); log: where an artefact's steps report
+    progress (one line each; ``parknss reproduce`` prints them on stderr).
     """
 
     out_dir: Path
@@ -91,6 +92,7 @@ class RunContext:
     memo: dict[str, Any] = field(default_factory=dict)
     store: Any = None
     tally: Tally = field(default_factory=Tally)
+    log: Callable[[str], None] = field(default=lambda msg: None)
     _campaign: Any = None
 
     def campaign(self):
