@@ -108,3 +108,32 @@ def test_block(block, work, monkeypatch, capsys):
         seen = {" ".join(ln.split()) for ln in printed}
         stale = [ln for ln in sample_lines(block) if ln not in seen]
         assert not stale, f"{block.id}: output sample lines not printed: {stale}"
+
+
+def test_markings_are_enforced():
+    """An unmarked block, a skip without a reason, a text block of commands, a stale
+    option or command in a synopsis and a stale replace are each reported."""
+    import typer
+
+    from helpers.docblocks import Block
+    from parknss.cli import app
+
+    root = typer.main.get_command(app)
+    assert problems(Block("x.md", 1, "", "a\n"))
+    assert problems(Block("x.md", 1, "bash", "true\n", [("skip", "")]))
+    assert problems(Block("x.md", 1, "bash", "true\n", [("drop", '"true"')]))
+    assert problems(Block("x.md", 1, "text", "parknss plan --scene 5\n"))
+    assert not problems(Block("x.md", 1, "text", "parknss: error: x\n"))
+    syn = [("synopsis", "")]
+    ok = Block("x.md", 1, "bash", "parknss plan --scene S [--json]\n"
+                                  "    [--workers N]\nparknss actuators study|build --nss M\n",
+               syn)
+    assert synopsis_problems(ok, root) == []
+    for text, said in [("parknss plan --scenes S\n", "no option --scenes"),
+                       ("parknss plan --scene S\n    [--nope]\n", "no option --nope"),
+                       ("parknss actuators study|nope\n", "no command 'nope'"),
+                       ("python benchmarks/bench_nope.py\n", "no such script")]:
+        assert any(said in p for p in synopsis_problems(Block("x.md", 1, "bash", text, syn),
+                                                        root)), text
+    with pytest.raises(AssertionError, match="stale"):
+        Block("x.md", 1, "bash", "true\n", [("replace", '"false" "true"')]).prepared()

@@ -131,6 +131,8 @@ class Block:
 def sample_lines(block: Block) -> list[str]:
     """The output lines of a ``console`` block (not ``$`` lines, their continuations or
     ``...``), spaces collapsed."""
+    if block.lang != "console":
+        return []
     out, cont = [], False
     for ln in block.prepared().splitlines():
         if ln.startswith("$ ") or cont:
@@ -207,8 +209,13 @@ def _options(cmd) -> set[str]:
 def synopsis_problems(block: Block, root) -> list[str]:
     """Usage lines against the CLI ``root`` (a click group): each ``parknss`` line's
     command path exists and each ``--option`` is one of its options; each script exists."""
-    bad = []
-    for line in block.commands():
+    bad, lines = [], []
+    for line in block.commands():  # an indented line continues the usage line above it
+        if lines and line[:1].isspace():
+            lines[-1] += " " + line.strip()
+        else:
+            lines.append(line)
+    for line in lines:
         text = re.sub(r"\s#.*$", "", line)
         toks = text.split()
         for tok in toks:
