@@ -750,6 +750,11 @@ def listing(root: Path) -> tuple[list[str], list[str]]:
         dirty = f"+dirty ({dirty_note(e)})" if pv.dirty else ""
         total = fit_cpu_s(e.fn, e.result)
         fit = f" (fit {total:.0f} s)" if total is not None and total > pv.cpu_s + 1 else ""
+        if fit:  # resumed: where its earlier sittings ran, when recorded
+            cpus = sorted({str(x.get("machine", {}).get("cpu", "?"))[:20]
+                           for x in pv.sittings or []})
+            fit = (fit[:-1] + f"; {len(pv.sittings)} sittings on {', '.join(cpus)})"
+                   if pv.sittings else fit[:-1] + "; earlier sittings not recorded)")
         rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
                     f"code {e.code_version} {state:7s}  {pv.git_revision[:10]}"
                     f"{dirty}  wall {pv.wall_s:.1f} s cpu {pv.cpu_s:.1f} s"
