@@ -82,6 +82,9 @@ class Derived:
     code: tuple[str, ...]
     inputs: str
     reads_data: bool
+    same_inputs: tuple[str, ...] = ()
+    """Arguments that do not change what the job reads (a grid cell's index): its input
+    digests are computed once for all their values."""
 
 
 NO_DATA = "none"
@@ -92,7 +95,7 @@ DERIVED: dict[str, Derived] = {
         ("sim/*.py", "sim/*/*.py", "chain/*.py", "actuators/*.py", "nss/*.py",
          "reference/*.py", "plant.py", "vehicle.py", "signals.py", "data/trial.py",
          "data/normalize.py"),
-        "parknss.experiments.derived:cell_inputs", False),
+        "parknss.experiments.derived:cell_inputs", False, ("grid", "index")),
     "parknss.experiments.derived:ladder_job": Derived(
         ("experiments/derived.py", "chain/*.py", "actuators/*.py", "nss/*.py", "data/trial.py",
          "data/normalize.py", "data/windows.py", "data/io.py", "metrics/errors.py",
@@ -408,7 +411,8 @@ class ResultStore:
     def _inputs(self, derived: Derived, kwargs: Mapping[str, Any]) -> dict[str, str]:
         """The input digests of a derived job, computed once per arguments."""
         memo = self.__dict__.setdefault("_input_memo", {})
-        ident = (derived.inputs, json.dumps(dict(kwargs), sort_keys=True, default=str))
+        rest = {k: v for k, v in kwargs.items() if k not in derived.same_inputs}
+        ident = (derived.inputs, json.dumps(rest, sort_keys=True, default=str))
         if ident not in memo:
             memo[ident] = resolve(derived.inputs)(kwargs)
         return dict(memo[ident])
