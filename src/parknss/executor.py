@@ -102,6 +102,9 @@ class Tally:
     cache: int = 0
     store: int = 0
     computed: int = 0
+    planned: int = 0
+    """Jobs asked for so far (counted when a :func:`run_jobs` call starts; the others
+    as results arrive, so an interrupted call's finished jobs are counted)."""
 
     @property
     def total(self) -> int:
@@ -134,12 +137,11 @@ class ResultCache:
         return True, doc["result"]
 
     def put(self, job: Job, result: Any) -> None:
-        p = self._path(job)
-        tmp = p.with_suffix(".tmp")
-        tmp.write_text(
-            json.dumps({"fn": job.fn, "kwargs": job.kwargs, "name": job.name, "result": result})
-        )
-        tmp.replace(p)
+        """Keep ``result`` durably (flushed to disk before the next job's result)."""
+        from parknss import durable
+
+        doc = {"fn": job.fn, "kwargs": job.kwargs, "name": job.name, "result": result}
+        durable.write_bytes(self._path(job), json.dumps(doc).encode())
 
 
 def run_jobs(
@@ -170,16 +172,20 @@ def run_jobs(
     results: list[Any] = [None] * len(jobs)
     todo: list[int] = []
     count = Tally()
+    tally = tally if tally is not None else Tally()
+    tally.planned += len(jobs)
     for i, job in enumerate(jobs):
         hit, value = cache.get(job) if cache else (False, None)
         if hit:
             results[i] = value
             count.cache += 1
+            tally.cache += 1
             continue
         hit, value = store.get(job) if store else (False, None)
         if hit:  # not copied into the cache: it holds what this run computed
             results[i] = value
             count.store += 1
+            tally.store += 1
         else:
             todo.append(i)
     if todo and store is not None and not store.fit_missing:
@@ -203,6 +209,7 @@ def run_jobs(
             if store:
                 store.put(jobs[i], value, wall_s, cpu_s)
             count.computed += 1
+            tally.computed += 1
             bar.update(1)
     finally:  # an interrupt or error between results: stop the pool's workers now
         stream.close()
@@ -210,10 +217,6 @@ def run_jobs(
     if progress and store is not None:
         print(f"{desc}: {count.cache} from the run cache, {count.store} from the store, "
               f"{count.computed} computed", file=sys.stderr)
-    if tally is not None:
-        tally.cache += count.cache
-        tally.store += count.store
-        tally.computed += count.computed
     return results
 
 

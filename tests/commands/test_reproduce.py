@@ -91,7 +91,6 @@ def test_table4_ladder_reports_each_step(tmp_path, actuator_campaign, actuator_n
     steps = [ln for ln in capsys.readouterr().err.splitlines()
              if ln.startswith("[reproduce] table4: ")]
     said = "\n".join(steps)
-    assert "running Phase A and Phase B first" in said
     assert said.count("fitted ") >= 4  # each deployed fit: three channels and the target
-    assert "B reference (all measured)" in said and "co-tuned " in said
+    assert "co-tuned " in said
     assert "monolithic epoch 1/1" in said

@@ -26,9 +26,15 @@ def test_no_verdict_to_reverse_when_the_target_is_phase_bs_own_winner():
     target = "brake/narx1s/cmd"
     f = cotuning_finding(_rows(0.11, 0.11, 0.11, selection={"brake": target},
                                cotune={"channel": "brake", "target": target, "best_step": 0}))
-    assert f.verdict == "differs"
+    # the paper's premise cannot arise: neither agrees nor differs
+    assert f.agrees is None and f.verdict == "no verdict to reverse"
     assert "Phase B's own brake winner" in f.measured and "kept its starting" in f.measured
-    # co-tuning lowering a target that never degraded the chain reverses nothing either
+    # the shipped chain's case: the own winner co-tuned at step 30, 19 % lower
+    f = cotuning_finding(_rows(0.0972, 0.0783, 0.0972, selection={"brake": target},
+                               cotune={"channel": "brake", "target": target, "best_step": 30}))
+    assert f.verdict == "no verdict to reverse" and "lowers the chain's vx full 19 %" in f.measured
+    # co-tuning lowering a target that never degraded the chain (no selection recorded)
+    # reverses nothing: differs
     assert cotuning_finding(_rows(0.059, 0.050, 0.059)).verdict == "differs"
 
 

@@ -421,9 +421,35 @@ def test_the_listing_gives_a_resumed_fit_its_whole_cpu_time(tmp_path):
     store.put(_job(2), {"seed": 2, "cpu_s": 12.0}, 13.0, 12.0)  # not resumed: one number
     rows, bad = listing(tmp_path)
     assert not bad and len(rows) == 2
-    assert any("cpu 1504.0 s (fit 3696 s)" in r for r in rows)
+    assert any("cpu 1504.0 s (fit 3696 s; earlier sittings not recorded)" in r for r in rows)
     assert any("cpu 12.0 s  " in r and "(fit" not in r for r in rows)
     # a limiter result carries its fit as the fold result it answers (ALIASES)
     assert fit_cpu_s(LIMITER_JOB, {"fold": {"cpu_s": 3696.5}, "cpu_s": 1.0}) == 3696.5
     assert fit_cpu_s(FOLD_JOB, {"cpu_s": 5}) == 5.0 and fit_cpu_s(FOLD_JOB, {"a": 1}) is None
     assert fit_cpu_s(FOLD_JOB, [1, 2]) is None and fit_cpu_s(LIMITER_JOB, {"fold": None}) is None
+
+
+def test_a_dirty_entry_says_whether_its_code_is_its_revisions():
+    """``results list``/``verify`` compare a dirty fit's recorded code version with the
+    training code committed at its revision (git, mechanically)."""
+    import subprocess
+
+    from parknss.experiments.store import Machine, Provenance, StoreEntry, dirty_note
+    from parknss.experiments.store import revision_code_version as at_rev
+
+    head = subprocess.run(["git", "-C", str(REPO_ROOT), "rev-parse", "HEAD"],
+                          capture_output=True, text=True).stdout.strip()
+    if not head:
+        pytest.skip("not a git checkout")
+    committed = at_rev(head)
+    assert committed is not None and len(committed) == 16
+
+    def entry(code: str, rev: str, dirty: bool = True) -> StoreEntry:
+        prov = Provenance(rev, dirty, Machine("p", "cpu", 1), "3.11", "2", 1.0, 1.0, "t",
+                          None, None)
+        return StoreEntry("k", FOLD_JOB, {}, "n", "d", code, {}, prov)
+
+    assert dirty_note(entry(committed, head)) == "code as committed"
+    assert dirty_note(entry("0" * 16, head)) == "code not as committed"
+    assert dirty_note(entry(committed, "f" * 40)) == "revision unknown here"
+    assert dirty_note(entry(committed, head, dirty=False)) == ""

@@ -183,3 +183,13 @@ def test_rate_model_through_a_predictor(campaign_dir, tmp_path, monkeypatch, cap
 def test_rate_needs_exactly_one_source(campaign_dir, capsys):
     assert main(["rate", "--data", str(campaign_dir)]) == 2
     assert "exactly one of --model" in capsys.readouterr().err
+
+
+def test_a_table_reads_back_from_its_json(table):
+    """What the result store keeps of a rating (Fig. 7 from the store) is the whole table."""
+    from parknss.metrics.rating_report import RatingTable
+
+    doc = json.loads(json.dumps(table.to_json()))
+    back = RatingTable.from_json(doc)
+    assert back.rows == table.rows and back.channels == table.channels
+    assert back.config == table.config and back.to_json() == doc

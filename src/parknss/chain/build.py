@@ -46,7 +46,10 @@ class BuildInputs:
         nss: NSS model folder (None: the shipped ``models/nss``).
         data: campaign folder (None: the default campaign).
         config: actuator YAML (None: the shipped ``configs/actuators.yaml``).
-        selection: a study's ``selection.json`` (None: run Phase A and B first).
+        selection: a study's ``selection.json`` (None: ``winners``, else run Phase A and
+            B first).
+        winners: channel -> candidate label, when no ``selection`` file is given (the
+            Phase B winners a chain artefact records).
         out: chain artefact folder to write (None: score only).
         monolithic: also train and score the monolithic-NSS row of Table IV.
         overwrite: replace an artefact already at ``out``.
@@ -58,6 +61,7 @@ class BuildInputs:
     data: Path | None = None
     config: Path | None = None
     selection: Path | None = None
+    winners: dict[str, str] | None = None
     out: Path | None = None
     monolithic: bool = False
     overwrite: bool = False
@@ -112,6 +116,8 @@ def run_build(inputs: BuildInputs, progress: Progress = _quiet) -> dict:
     sel_doc = None
     if inputs.selection is not None:
         winners = selection_winners(inputs.selection)
+    elif inputs.winners is not None:
+        winners = dict(inputs.winners)
     else:
         progress("no --selection: running Phase A and Phase B first")
         data = str(inputs.data) if inputs.data is not None else None

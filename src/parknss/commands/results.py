@@ -76,6 +76,11 @@ def register(app: typer.Typer) -> None:
                                f"{bad[0]}")
         typer.echo(f"{len(rows)} fits and {len(held)} parked states in {root}: all valid; "
                    f"{describe(root, code_version())}")
+        dirty = sum("+dirty (" in r for r in rows)
+        if dirty:
+            same = sum("+dirty (code as committed)" in r for r in rows)
+            typer.echo(f"{dirty} entries were made from a dirty tree; {same} of them with the "
+                       "code (CODE_FILES, or a derived job's code) as committed at their revision")
         stale = sum(" stale " in r for r in rows)
         if stale:
             typer.echo(f"{stale} fits are of a code version not accepted here (stale): "

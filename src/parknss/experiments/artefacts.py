@@ -229,20 +229,30 @@ def time_to_accuracy_artefact(ctx: RunContext) -> ArtefactResult:
 
 @register("fig7", "Fig. 7: ISO/TS 18571 ratings", "§V-F, Fig. 7")
 def fig7_artefact(ctx: RunContext) -> ArtefactResult:
-    from parknss.chain.rating import RateInputs
+    """The truth replay and the shipped NSS rated (:func:`parknss.experiments.derived.rating_job`,
+    through the result store: keyed by the campaign, the model's manifest and the rating
+    config); the files and the box plot are written from the stored per-trial rows."""
     from parknss.config import SHIPPED_NSS
-    from parknss.experiments.rating import run_rate
+    from parknss.executor import Job, run_jobs
+    from parknss.experiments.rating import write_rating
+    from parknss.metrics.rating_report import RatingTable
 
-    data = ctx.data or _campaign_dir(ctx)
+    data = str(ctx.data or _campaign_dir(ctx))
     tables, figs, notes = [], [], []
     runs = [("truth replay (sensor-noise ceiling)", None, True)]
     if (SHIPPED_NSS / "model.json").is_file():
-        runs.append((f"shipped NSS model ({SHIPPED_NSS.name})", SHIPPED_NSS, False))
+        runs.append((f"shipped NSS model ({SHIPPED_NSS.name})", str(SHIPPED_NSS), False))
     else:
         notes.append(f"no shipped NSS model at {SHIPPED_NSS}: only the truth replay is rated")
-    for label, model, replay in runs:
+    jobs = [Job("parknss.experiments.derived:rating_job",
+                {"data": data, "model": model, "replay_truth": replay},
+                name="truth replay" if replay else "shipped NSS") for _, model, replay in runs]
+    docs = run_jobs(jobs, cache_dir=ctx.cache_dir, progress=ctx.progress, desc="ratings",
+                    store=ctx.store, tally=ctx.tally)
+    for (label, _, replay), doc in zip(runs, docs, strict=True):
         sub = ctx.out_dir / ("fig7_truth" if replay else "fig7_model")
-        tab = run_rate(RateInputs(data=data, model=model, replay_truth=replay), sub).table
+        tab = RatingTable.from_json(doc)
+        write_rating(tab, doc["source"], sub)
         s = tab.summary()
         rows = [[c.channel, c.conditioning, c.n_trials, c.overall, c.grade] for c in s.channels]
         rows.append(["mean", "raw / filtered", "", f"{s.mean_raw:.3f} / {s.mean_filtered:.3f}", ""])
@@ -278,15 +288,19 @@ def table5_artefact(ctx: RunContext) -> ArtefactResult:
 
     b = ctx.experiments_config().budget(ctx.quick)
     cfg = load_closed_loop_config()
-    plants, notes = ["kinematic", "reference"], []
-    try:
-        check_plants(["chain"], cfg)
-        plants.insert(1, "chain")
-    except ParknssError as exc:
-        notes.append(f"chain plant not run: {exc}")
+    plants, notes = list(b.sim_plants), []
+    if "chain" in plants:
+        try:
+            check_plants(["chain"], cfg)
+        except ParknssError as exc:
+            plants.remove("chain")
+            notes.append(f"chain plant not run: {exc}")
     cells = list(b.sim_cells) if b.sim_cells is not None else list(range(N_CELLS))
+    # each cell through the result store: kept there as it finishes (a killed run keeps
+    # every finished cell), read from there by the next run (--stored-only: only there)
     rows = run_grid("36", plants, cells, ctx.workers or 1, executor=ctx.executor,
-                    address=ctx.address, progress=ctx.progress)
+                    address=ctx.address, progress=ctx.progress, cache_dir=ctx.cache_dir,
+                    store=ctx.store, tally=ctx.tally)
     doc = grid_report(rows, plants, "36", cfg.clearance_floor_cm)
     keys = [
         ("completed", "completed"),
@@ -306,9 +320,15 @@ def table5_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *plants],
         [[label, *(doc["summary"][p][k] for p in plants)] for k, label in keys],
     )
-    figs = list(draw_scene_run(simulate_scene(str(b.sim_scene), plants), ctx.out_dir).values())
-    if not figs:
-        notes.append(f"scene {b.sim_scene} is not plannable: no Figs. 8/9")
+    if ctx.store is not None and not ctx.store.fit_missing:  # --stored-only: no closed loop
+        figs = []
+        notes.append(f"Figs. 8/9 not drawn (--stored-only runs no closed loop; `parknss "
+                     f"simulate --scene {b.sim_scene} --plant chain` draws them)")
+    else:
+        figs = list(draw_scene_run(simulate_scene(str(b.sim_scene), plants),
+                                   ctx.out_dir).values())
+        if not figs:
+            notes.append(f"scene {b.sim_scene} is not plannable: no Figs. 8/9")
     return ArtefactResult([table], figs, notes="; ".join(notes))
 
 
@@ -324,30 +344,37 @@ def _cotune_note(co: dict) -> str:
 
 @register("table4", "Table IV: the assembled-chain fidelity ladder", "§V-D, Table IV")
 def table4_artefact(ctx: RunContext) -> ArtefactResult:
-    """Table IV. Full budget: ``parknss actuators ladder`` on the shipped NSS (Phase A/B,
-    the build, co-tuning and the monolithic row, all measured now). ``--quick``: the rows
-    measured when the shipped chain was built (read from models/chain/chain.json, which
-    ``parknss actuators build`` writes), labelled as such."""
+    """Table IV of the shipped chain. Full budget: the ladder that built ``models/chain``
+    (:func:`parknss.experiments.derived.ladder_job`: ``parknss actuators ladder`` on the
+    shipped NSS with the Phase B winners the chain records, the monolithic row included),
+    through the result store, keyed by the chain's and the NSS's manifests, the campaign
+    and the actuator config, so another chain never answers for it. ``--quick``: the rows
+    recorded in ``models/chain/chain.json``, labelled as such."""
     import json
 
-    from parknss.config import SHIPPED_CHAIN, SHIPPED_NSS
+    from parknss.config import SHIPPED_CHAIN
     from parknss.experiments.findings import cotuning_finding
 
+    meta_path = SHIPPED_CHAIN / "chain.json"
+    if not meta_path.is_file():
+        return ArtefactResult(findings=[cotuning_finding()], notes=f"{meta_path} not found")
+    check = ""
     if ctx.quick:
-        meta_path = SHIPPED_CHAIN / "chain.json"
-        if not meta_path.is_file():
-            return ArtefactResult(findings=[cotuning_finding()], notes=f"{meta_path} not found")
         doc = json.loads(meta_path.read_text())["build"]
         source = f"rows recorded by `parknss actuators build` in {meta_path}"
     else:
-        from parknss.actuators.phase_a import Fanout
-        from parknss.chain.build import BuildInputs, run_build
+        from parknss.executor import Job, run_jobs
 
-        fanout = Fanout(ctx.executor, ctx.workers or 1, ctx.address)
-        doc = run_build(BuildInputs(nss=SHIPPED_NSS, data=ctx.data, monolithic=True,
-                                         fanout=fanout),
-                        lambda msg: ctx.log(f"[reproduce] table4: {msg}"))  # minutes: say so
-        source = "measured now by `parknss actuators ladder` on the shipped NSS"
+        job = Job("parknss.experiments.derived:ladder_job",
+                  {"data": str(ctx.data) if ctx.data else None}, name="ladder models/chain")
+        doc = run_jobs([job], cache_dir=ctx.cache_dir, progress=ctx.progress, desc="ladder",
+                       store=ctx.store, tally=ctx.tally)[0]
+        source = ("`parknss actuators ladder --nss models/nss` with the Phase B winners "
+                  "models/chain records (its actuator study ran on a snapshot of the NSS fit; "
+                  "a study on the final NSS may pick others)")
+        same = "identical to" if doc.get("rebuilds_artefact") else "differ from"
+        check = (f"; rebuilt actuator weights {same} models/chain's, rows within "
+                 f"{doc.get('max_abs_diff') or 0:.2g} of those it records")
     from parknss.chain.ladder import LADDER_ROWS
 
     rows = [
@@ -364,5 +391,5 @@ def table4_artefact(ctx: RunContext) -> ArtefactResult:
         [table],
         findings=[cotuning_finding(doc)],
         notes=f"{source}; Phase B winners: {doc.get('selection')}; deployed: "
-              f"{doc.get('deployed')}; co-tuning: {_cotune_note(doc.get('cotune') or {})}",
+              f"{doc.get('deployed')}; co-tuning: {_cotune_note(doc.get('cotune') or {})}{check}",
     )

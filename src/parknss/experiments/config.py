@@ -41,6 +41,9 @@ class Budget(StrictModel):
     loss_lrs: list[float] = Field([1e-3, 2e-3, 4e-3], description="LR sweep per loss")
     sim_cells: list[int] | None = Field(None, description="Table V cells (None: all 36)")
     sim_scene: int = Field(0, ge=0, description="grid cell drawn in Figs. 8/9")
+    sim_plants: list[Literal["kinematic", "chain", "reference"]] = Field(
+        ["kinematic", "chain", "reference"], min_length=1,
+        description="Table V plants (chain: left out, with a note, when there is none)")
     tta_folds: list[int] = Field([0, 1, 2, 3], description="CV folds of the recipe comparison")
     overrides: Overrides = Field(default_factory=dict, description="NSS overrides, all fits")
     recipe: Literal["paper", "fast"] = Field(

@@ -310,6 +310,13 @@ def seed_noise_findings(res: SeedNoiseResult) -> list[Finding]:
     ]
 
 
+NO_VERDICT_TO_REVERSE = "no verdict to reverse"
+
+
+def _lowered(before: float, after: float) -> str:
+    return f"{100 * (before - after) / before:.0f} %" if before > 0 else "n/a"
+
+
 def cotuning_finding(doc: dict | None = None) -> Finding:
     """§V-D: the signal-fitted 1 s NARX brake degrades the chain against the Phase B
     assembly, and consequence-level co-tuning turns it into one that beats that assembly;
@@ -330,8 +337,14 @@ def cotuning_finding(doc: dict | None = None) -> Finding:
     co = doc.get("cotune") or {}
     target, channel = co.get("target"), co.get("channel")
     if target is not None and (doc.get("selection") or {}).get(channel) == target:
+        # the paper's premise (the signal-fitted target loses to Phase B's pick) cannot
+        # arise: neither "agrees" nor "differs", whatever co-tuning did
         measured += f"; {target} is Phase B's own {channel} winner here: no verdict to reverse"
-    elif sig <= ref:
+        measured += ("; co-tuning kept its starting weights (no step lowered its loss)"
+                     if co.get("best_step") == 0 else
+                     f"; co-tuning lowers the chain's vx full {_lowered(sig, tuned)}")
+        return Finding(claim, measured, None, NO_VERDICT_TO_REVERSE)
+    if sig <= ref:
         measured += "; the signal-fitted target does not degrade the chain here"
     elif tuned >= ref:
         measured += "; lowered, but the Phase B assembly stays better" if tuned < sig else ""

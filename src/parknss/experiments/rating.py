@@ -39,6 +39,12 @@ def run_rate(
 ) -> RatingRun:
     """Rate, write the CSV, JSON and figure to ``out``; the table and the document."""
     table, source = rate_source(inputs, progress)
+    return RatingRun(table, write_rating(table, source, out))
+
+
+def write_rating(table: RatingTable, source: dict, out: Path) -> dict:
+    """Write ``ratings.csv``, ``ratings.json`` and Fig. 7 of a rating of ``source`` into
+    ``out``; the JSON document (also what ``parknss reproduce`` rebuilds from the store)."""
     out.mkdir(parents=True, exist_ok=True)
     doc = {"source": source, **table.to_json()}
     doc["files"] = {
@@ -47,7 +53,7 @@ def run_rate(
         "figure": str(draw_iso_boxplot(table, out / "iso_rating.png")),
     }
     write_text_atomic(out / "ratings.json", json.dumps(doc, indent=2))
-    return RatingRun(table, doc)
+    return doc
 
 
 def rate_run(

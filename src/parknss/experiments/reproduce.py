@@ -36,7 +36,7 @@ from parknss.experiments.registry import artefacts, get
 from parknss.experiments.results import NOT_MEASURED, ArtefactResult, Finding, RunContext
 from parknss.experiments.store import open_store
 from parknss.nss.config import NSSConfig
-from parknss.outputs import git_revision, run_folder
+from parknss.outputs import git_revision, keep_on_interrupt, run_folder
 from parknss.report.html import write_report
 
 
@@ -115,28 +115,54 @@ def reproduce(inputs: ReproduceInputs, log: Callable[[str], None] = _quiet) -> d
     return summary
 
 
+def partial_line(art_name: str, done: int, total: int, t: Tally, stored: bool) -> str:
+    """What an interrupted run kept, in one line: the artefacts finished, the jobs of
+    the interrupted one that finished (each kept in the run cache and, with a store,
+    the result store)."""
+    where = "the run cache and the result store" if stored else "the run cache"
+    return (f"interrupted during {art_name}: {done} of {total} artefacts finished; "
+            f"{t.total} of {t.planned} of its jobs (fits, cells) finished and kept in {where}")
+
+
 def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> dict:
-    out, quick = ctx.out_dir, ctx.quick
-    sections = []
+    out = ctx.out_dir
+    sections: list = []
     sources: dict[str, dict[str, int]] = {}
     for art in chosen:
         log(f"[reproduce] {art.name}: {art.title}")
         t0 = time.perf_counter()
         ctx.tally = Tally()
+        def line(name: str = art.name) -> str:
+            return partial_line(name, len(sections), len(chosen), ctx.tally,
+                                ctx.store is not None and ctx.store.write)
+
         try:
-            res = art.make(ctx)
+            with keep_on_interrupt(lambda: f"{line()}; partial report {out / 'report.html'}; "
+                                   "run the same command again to resume"):
+                res = art.make(ctx)
         except MissingResultsError as exc:  # --stored-only: say what is missing, fit nothing
             res = not_measured(art.title, exc)
             log(f"[reproduce] {art.name}: not measured ({exc})")
+        except KeyboardInterrupt:  # SIGINT/SIGTERM: a partial report, then stop (exit 130/143)
+            _write(ctx, sections, sources, stamp, inputs, partial=line())
+            raise
         res.wall_s = time.perf_counter() - t0
         t = ctx.tally
         sources[art.name] = {"run_cache": t.cache, "store": t.store, "fitted": t.computed}
         if t.total:
             log(f"[reproduce] {art.name}: {t.total} fits: {t.cache} from the run cache, "
                 f"{t.store} from the store, {t.computed} fitted")
-        if quick:  # a smoke test supports no verdict (module doc)
+        if ctx.quick:  # a smoke test supports no verdict (module doc)
             res.findings = [f.smoke_test() for f in res.findings]
         sections.append((art, res))
+    return _write(ctx, sections, sources, stamp, inputs)
+
+
+def _write(ctx: RunContext, sections: list, sources: dict, stamp: str,
+           inputs: ReproduceInputs, partial: str | None = None) -> dict:
+    """Write ``report.html`` of the finished ``sections`` (``partial``: the line saying
+    where an interrupted run stopped, shown at the top); the run summary."""
+    out, quick = ctx.out_dir, ctx.quick
     meta = {
         "artefacts": [a.name for a, _ in sections],
         "quick": quick,
@@ -149,6 +175,7 @@ def _run(ctx: RunContext, chosen, stamp: str, inputs: ReproduceInputs, log) -> d
         "store_writes": bool(ctx.store and ctx.store.write),
         "refit": inputs.refit,
         "sources": sources,
+        "partial": partial,
         "config": {
             "experiments": ctx.experiments_config().model_dump(mode="json"),
             "budget": "quick" if quick else "full",

@@ -69,6 +69,58 @@ misses exactly the fits it changes (tuning the fast recipe's defaults keeps the 
 recipe's fits, which do not read them)."""
 CODE_EXCLUDED: tuple[str, ...] = ("nss/config.py",)
 
+
+
+@dataclass(frozen=True)
+class Derived:
+    """A stored job that is not an NSS fit (:mod:`parknss.experiments.derived`): the
+    ``code`` it runs (globs under ``src/parknss/``, hashed by :func:`code_version` in
+    place of :data:`CODE_FILES`), the function (``"module:function"``) giving the content
+    digests of what it reads besides its arguments (added to its key as ``inputs``), and
+    whether it reads the campaign (else its data hash is :data:`NO_DATA`)."""
+
+    code: tuple[str, ...]
+    inputs: str
+    reads_data: bool
+    same_inputs: tuple[str, ...] = ()
+    """Arguments that do not change what the job reads (a grid cell's index): its input
+    digests are computed once for all their values."""
+
+
+NO_DATA = "none"
+"""The data hash of a stored job that reads no campaign (a closed-loop grid cell)."""
+
+DERIVED: dict[str, Derived] = {
+    "parknss.sim.grid:cell_job": Derived(
+        ("sim/*.py", "sim/*/*.py", "chain/*.py", "actuators/*.py", "nss/*.py",
+         "reference/*.py", "plant.py", "vehicle.py", "signals.py", "data/trial.py",
+         "data/normalize.py"),
+        "parknss.experiments.derived:cell_inputs", False, ("grid", "index")),
+    "parknss.experiments.derived:ladder_job": Derived(
+        ("experiments/derived.py", "chain/*.py", "actuators/*.py", "nss/*.py", "data/trial.py",
+         "data/normalize.py", "data/windows.py", "data/io.py", "metrics/errors.py",
+         "signals.py", "vehicle.py"),
+        "parknss.experiments.derived:ladder_inputs", True),
+    "parknss.experiments.derived:rating_job": Derived(
+        ("experiments/derived.py", "metrics/*.py", "chain/*.py", "actuators/*.py", "nss/*.py",
+         "data/trial.py", "data/io.py", "signals.py", "vehicle.py"),
+        "parknss.experiments.derived:rating_inputs", True),
+}
+"""The report's stored results that are not NSS fits: Table V's grid cells, Table IV's
+ladder of a chain artefact, Fig. 7's ratings (:mod:`parknss.experiments.derived`)."""
+
+_DERIVED_CODES: dict[str, str] = {}
+
+
+def job_code_version(fn: str) -> str:
+    """The code version of job ``fn``: :func:`code_version` of its :data:`DERIVED` code,
+    else of the training code (:data:`CODE_FILES`); computed once per process."""
+    if fn not in _DERIVED_CODES:
+        d = DERIVED.get(fn)
+        _DERIVED_CODES[fn] = code_version(patterns=d.code) if d else code_version()
+    return _DERIVED_CODES[fn]
+
+
 KEY_IGNORED: tuple[str, ...] = ("data", "save_dir", "progress", "state_dir")
 """Job arguments that do not decide its numbers: the campaign folder (its content is the
 data hash), where a model is saved, the progress bar."""
@@ -345,13 +397,32 @@ class ResultStore:
 
     def entry_key(self, job: Job, code: str | None = None) -> tuple[str, dict, str]:
         """(key, key arguments, data hash) of ``job`` under code version ``code`` (None:
-        this checkout's)."""
+        this checkout's); a :data:`DERIVED` job's key arguments hold the digests of what
+        it reads (``inputs``), its data hash is :data:`NO_DATA` when it reads no campaign."""
         kw = key_kwargs(bound_kwargs(job.fn, job.kwargs))
-        dh = self.data_hash(job.kwargs.get("data"))
-        return store_key(job.fn, kw, dh, code or self.code), kw, dh
+        derived = DERIVED.get(job.fn)
+        if derived is None:
+            dh = self.data_hash(job.kwargs.get("data"))
+            return store_key(job.fn, kw, dh, code or self.code), kw, dh
+        kw["inputs"] = self._inputs(derived, job.kwargs)
+        dh = self.data_hash(job.kwargs.get("data")) if derived.reads_data else NO_DATA
+        return store_key(job.fn, kw, dh, code or job_code_version(job.fn)), kw, dh
+
+    def _inputs(self, derived: Derived, kwargs: Mapping[str, Any]) -> dict[str, str]:
+        """The input digests of a derived job, computed once per arguments."""
+        memo = self.__dict__.setdefault("_input_memo", {})
+        rest = {k: v for k, v in kwargs.items() if k not in derived.same_inputs}
+        ident = (derived.inputs, json.dumps(rest, sort_keys=True, default=str))
+        if ident not in memo:
+            memo[ident] = resolve(derived.inputs)(kwargs)
+        return dict(memo[ident])
 
     def accepted_keys(self, job: Job) -> list[str]:
-        """The keys of ``job`` under every accepted code version (:attr:`codes`)."""
+        """The keys of ``job`` under every accepted code version (:attr:`codes`; a
+        :data:`DERIVED` job: its own code version only, the canary lineage vouches for
+        the training code alone)."""
+        if job.fn in DERIVED:
+            return [self.entry_key(job)[0]]
         return [self.entry_key(job, c)[0] for c in self.codes]
 
     def path(self, job: Job) -> Path:
@@ -433,12 +504,16 @@ class ResultStore:
             data=job.kwargs.get("data"), config=_nss_config(job.kwargs),
             sittings=sittings(job.kwargs.get("state_dir")),
         )
-        entry = StoreEntry(key, job.fn, kw, job.name, dh, self.code, result, prov)
+        code = job_code_version(job.fn) if job.fn in DERIVED else self.code
+        entry = StoreEntry(key, job.fn, kw, job.name, dh, code, result, prov)
         p = self.root / short_name(job.fn) / f"{key}.json"
         p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_suffix(f".{os.getpid()}.tmp")  # two runs may store the same fit
-        tmp.write_text(json.dumps(entry.to_json(), indent=1, sort_keys=True) + "\n")
-        tmp.replace(p)
+        # durable: a kill or power loss right after this keeps the whole entry (the next
+        # grid cell, the next fit, may be where the run is stopped)
+        from parknss import durable
+
+        text = json.dumps(entry.to_json(), indent=1, sort_keys=True) + "\n"
+        durable.write_bytes(p, text.encode())
         from parknss.experiments import parked
 
         if any([parked.unpark(self.root, k) for k in self.accepted_keys(job)]):
@@ -579,11 +654,88 @@ def seal(root: str | Path) -> tuple[int, int]:
     return done, already
 
 
+def _match(rel: str, pattern: str) -> bool:
+    """``rel`` (a path under ``src/parknss/``) matches the glob ``pattern`` part by part,
+    as :meth:`pathlib.Path.glob` does (``*`` stays inside one folder)."""
+    from fnmatch import fnmatchcase
+
+    a, b = rel.split("/"), pattern.split("/")
+    return len(a) == len(b) and all(fnmatchcase(x, y) for x, y in zip(a, b, strict=True))
+
+
+_REV_CODES: dict[tuple[str, tuple[str, ...]], str | None] = {}
+
+
+def revision_code_version(rev: str, patterns: tuple[str, ...] = CODE_FILES) -> str | None:
+    """:func:`code_version` of the files ``patterns`` as committed at git revision ``rev``
+    of this checkout (None: no git, or the revision is unknown here). A fit made from a
+    *dirty* tree whose recorded code version equals its revision's ran the committed
+    training code: the uncommitted edits were elsewhere (or comments only)."""
+    import subprocess
+
+    ident = (rev, patterns)
+    if ident in _REV_CODES:
+        return _REV_CODES[ident]
+    prefix = "src/parknss/"
+    try:
+        names = subprocess.run(["git", "-C", str(REPO_ROOT), "ls-tree", "-r", "--name-only",
+                                rev, prefix], capture_output=True, text=True, check=True,
+                               timeout=30).stdout.splitlines()
+        rels = sorted(n[len(prefix):] for n in names if n.startswith(prefix)
+                      and n[len(prefix):] not in CODE_EXCLUDED
+                      and any(_match(n[len(prefix):], pat) for pat in patterns))
+        batch = subprocess.run(["git", "-C", str(REPO_ROOT), "cat-file", "--batch"],
+                               input="".join(f"{rev}:{prefix}{r}\n" for r in rels).encode(),
+                               capture_output=True, check=True, timeout=60).stdout
+        h, pos = hashlib.sha256(), 0
+        for rel in rels:  # "<sha> blob <size>\n<content>\n" per file, in order
+            head_end = batch.index(b"\n", pos)
+            size = int(batch[pos:head_end].split()[2])
+            text = batch[head_end + 1 : head_end + 1 + size].decode()
+            pos = head_end + 2 + size
+            h.update(rel.encode() + b"\0")
+            h.update(code_tokens(text) + b"\0")
+        out: str | None = h.hexdigest()[:16] if rels else None
+    except (OSError, ValueError, IndexError, subprocess.SubprocessError):
+        out = None
+    _REV_CODES[ident] = out
+    return out
+
+
+def dirty_note(e: StoreEntry) -> str:
+    """For an entry fitted from a dirty tree, whether its code version is that of the
+    code committed at its git revision: ``"code as committed"``, ``"code not as
+    committed"`` or ``"revision unknown here"``; empty for a clean one."""
+    if not e.provenance.dirty:
+        return ""
+    d = DERIVED.get(e.fn)
+    got = revision_code_version(e.provenance.git_revision, d.code if d else CODE_FILES)
+    if got is None:
+        return "revision unknown here"
+    return "code as committed" if got == e.code_version else "code not as committed"
+
+
+def _derived_state(e: StoreEntry) -> str:
+    """``current`` when a derived entry's code version and input digests are this
+    checkout's, else ``stale`` (another chain, config or simulator)."""
+    d = DERIVED[e.fn]
+    if e.code_version != job_code_version(e.fn):
+        return "stale"
+    kwargs = {k: v for k, v in e.kwargs.items() if k != "inputs"}
+    try:
+        now = resolve(d.inputs)(kwargs)
+    except Exception:  # an input that no longer reads (a removed chain): not this checkout's
+        return "stale"
+    return "current" if now == e.kwargs.get("inputs") else "stale"
+
+
 def listing(root: Path) -> tuple[list[str], list[str]]:
     """(one line per valid entry, one line per invalid file) of the store at ``root``;
     an entry of this checkout's code version is ``current``, one of a version the
     lineage accepts ``lineage`` (:mod:`parknss.experiments.lineage`), any other
-    ``stale``."""
+    ``stale`` (a :data:`DERIVED` entry: ``current`` when its code and input digests are
+    this checkout's); a dirty entry says whether its code is its revision's
+    (:func:`dirty_note`)."""
     from parknss.experiments.lineage import accepted_versions
 
     current = code_version()
@@ -594,12 +746,21 @@ def listing(root: Path) -> tuple[list[str], list[str]]:
             bad.append(f"{p.relative_to(root)}: {e}")
             continue
         pv = e.provenance
-        state = ("current" if e.code_version == current
-                 else "lineage" if e.code_version in accepted else "stale")
+        if e.fn in DERIVED:
+            state = _derived_state(e)
+        else:
+            state = ("current" if e.code_version == current
+                     else "lineage" if e.code_version in accepted else "stale")
+        dirty = f"+dirty ({dirty_note(e)})" if pv.dirty else ""
         total = fit_cpu_s(e.fn, e.result)
         fit = f" (fit {total:.0f} s)" if total is not None and total > pv.cpu_s + 1 else ""
+        if fit:  # resumed: where its earlier sittings ran, when recorded
+            cpus = sorted({str(x.get("machine", {}).get("cpu", "?"))[:20]
+                           for x in pv.sittings or []})
+            fit = (fit[:-1] + f"; {len(pv.sittings)} sittings on {', '.join(cpus)})"
+                   if pv.sittings else fit[:-1] + "; earlier sittings not recorded)")
         rows.append(f"{short_name(e.fn)}/{e.key}  {e.name:28s} data {e.data_hash[:10]}  "
                     f"code {e.code_version} {state:7s}  {pv.git_revision[:10]}"
-                    f"{'+dirty' if pv.dirty else ''}  wall {pv.wall_s:.1f} s cpu {pv.cpu_s:.1f} s"
+                    f"{dirty}  wall {pv.wall_s:.1f} s cpu {pv.cpu_s:.1f} s"
                     f"{fit}  {pv.finished_utc}")
     return rows, bad

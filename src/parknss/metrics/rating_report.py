@@ -167,6 +167,13 @@ class RatingTable:
             "summary": self.summary().to_json(),
         }
 
+    @classmethod
+    def from_json(cls, doc: Mapping) -> RatingTable:
+        """The table back from :meth:`to_json` (its rows, channels and config; the
+        summary is recomputed from the rows)."""
+        return cls([RatingRow(**r) for r in doc["rows"]], tuple(doc["channels"]),
+                   RateConfig.model_validate(doc["config"]))
+
     def table(self) -> str:
         """A fixed-width text table of the summary."""
         s = self.summary()

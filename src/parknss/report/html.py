@@ -66,6 +66,9 @@ def write_report(
             "budget (a few epochs of a tiny net): it shows that every study runs end to "
             "end; its numbers support no verdict on the paper's findings.</p>"
         )
+    if meta.get("partial"):
+        parts.append(f"<p class='smoke'><b>Partial report.</b> "
+                     f"{html.escape(str(meta['partial']))}</p>")
     rows = "".join(_finding_row(f, art) for art, res in sections for f in res.findings)
     if rows:
         parts.append(

@@ -80,9 +80,13 @@ def run_grid(
     address: str | None = None,
     cache_dir: str | Path | None = None,
     progress: bool = True,
+    store=None,
+    tally=None,
 ) -> list[dict]:
     """Run ``cells`` of grid "36", "12" or "252" under ``plants`` through the executor;
-    one JSON row per (cell, plant), cells in the order given."""
+    one JSON row per (cell, plant), cells in the order given. With a result ``store``
+    (``parknss reproduce``) each cell is looked up there first and kept there as soon as
+    it finishes (:mod:`parknss.experiments.derived`)."""
     files = files or SimConfigFiles()
     kwargs = {
         "plants": plants,
@@ -104,6 +108,8 @@ def run_grid(
         cache_dir=cache_dir,
         progress=progress,
         desc=f"grid {grid}",
+        store=store,
+        tally=tally,
     )
     return [row for rows in results for row in rows]
 

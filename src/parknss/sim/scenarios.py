@@ -643,11 +643,15 @@ def run_cells(
     cache_dir: str | Path | None = None,
     progress: bool = True,
     desc: str = "cells",
+    store=None,
+    tally=None,
 ) -> list:
     """Each cell of a grid as one job of the one executor (:func:`parknss.executor.run_jobs`,
     local pool or Ray): ``fn`` ("module:function") is called as ``fn(grid=, index=,
     **kwargs)`` with grid "252" or "36" (the core's cells are 36-grid cells) and JSON
-    ``kwargs``; the results in the order of ``cells``."""
+    ``kwargs``; the results in the order of ``cells``. ``store``/``tally``: the result
+    store each finished cell is kept in as it finishes, and where the results came from
+    (:func:`parknss.executor.run_jobs`)."""
     from parknss.executor import Job, run_jobs
 
     kind = "252" if grid == "252" else "36"
@@ -660,4 +664,6 @@ def run_cells(
         address=address,
         progress=progress,
         desc=desc,
+        store=store,
+        tally=tally,
     )
