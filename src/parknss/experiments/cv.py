@@ -54,11 +54,12 @@ FOLDS = DEFAULT_FOLDS
 
 
 def mean_std(values: list[float]) -> tuple[float, float]:
-    """Mean and population std (ddof = 0) ignoring NaN; (nan, nan) if nothing is left."""
+    """Mean and sample std (ddof = 1, as every spread of the studies) ignoring NaN;
+    (nan, nan) if nothing is left, std NaN for one value."""
     v = np.asarray([x for x in values if x is not None and not math.isnan(x)], dtype=float)
     if v.size == 0:
         return math.nan, math.nan
-    return float(v.mean()), float(v.std(ddof=0))
+    return float(v.mean()), float(v.std(ddof=1)) if v.size > 1 else math.nan
 
 
 @dataclass
