@@ -98,14 +98,10 @@ def judge_of(ctx: RunContext, fit: bool = True):
 
 
 def judged(judge, make):
-    """``make(judge)``'s findings, each with its verdict on the config's ``beside`` metric."""
-    from parknss.experiments.findings import with_beside
+    """:func:`parknss.experiments.findings.judged` (findings and their ``beside`` verdicts)."""
+    from parknss.experiments.findings import judged as _judged
 
-    out = make(judge)
-    alt = judge.cfg.beside
-    if alt and alt != judge.metric:
-        with_beside(out, make(judge.with_metric(alt)), alt)
-    return out
+    return _judged(judge, make)
 
 
 @register("limiter", "Inference limiter study", "§V-B")

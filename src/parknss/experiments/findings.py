@@ -324,6 +324,16 @@ def with_beside(main: list[Finding], beside: list[Finding], metric: str) -> list
     return main
 
 
+def judged(judge: Judge, make) -> list[Finding]:
+    """``make(judge)``'s findings, each with its verdict on the config's ``beside`` metric
+    (``make`` called again with the judge on that metric)."""
+    out = make(judge)
+    alt = judge.cfg.beside
+    if alt and alt != judge.metric:
+        with_beside(out, make(judge.with_metric(alt)), alt)
+    return out
+
+
 def cotuning_finding(doc: dict | None = None) -> Finding:
     """§V-D: the signal-fitted 1 s NARX brake degrades the chain against the Phase B
     assembly, and consequence-level co-tuning turns it into one that beats that assembly;
