@@ -89,9 +89,12 @@ def test_the_interval_is_never_narrower_than_the_seed_noise():
 
 
 def test_a_fold_without_enough_seeds_borrows_the_pooled_floor():
-    fn = FoldNoise({0: 0.1, 1: math.nan, 2: 0.2}, {0: 3, 1: 2, 2: 4})
-    assert fn.of(0) == 0.1 and fn.of(1) == pytest.approx(math.sqrt((0.01 + 0.04) / 2))
-    assert "fold 1 < 3 seeds: pooled" in fn.describe()
+    fn = FoldNoise({0: 0.1, 1: math.nan, 2: 0.2, 3: math.nan}, {0: 3, 1: 2, 2: 4, 3: 2},
+                   few={1: 0.05, 3: 0.3})
+    pooled = math.sqrt((0.01 + 0.04) / 2)
+    assert fn.of(0) == 0.1 and fn.of(1) == pytest.approx(pooled)
+    assert fn.of(3) == 0.3  # its two seeds spread more than the pool: theirs
+    assert "< 3 seeds, the larger of pooled 15.8 %" in fn.describe()
     assert FoldNoise({}, {}, prior=0.02).of(3) == 0.02
 
 

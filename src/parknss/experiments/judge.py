@@ -58,18 +58,21 @@ class FoldSeeds:
     def spread(self, quantity: Callable[[FoldScore], float], min_seeds: int,
                relative: bool) -> FoldNoise:
         """Per fold, the sample sd (ddof = 1) of ``quantity`` over its seeds, over |mean|
-        when ``relative`` (the CV); NaN for a fold with fewer than ``min_seeds``."""
-        sd, seeds = {}, {}
+        when ``relative`` (the CV); NaN for a fold with fewer than ``min_seeds`` (its
+        two-seed estimate kept aside, :class:`FoldNoise`)."""
+        sd, seeds, few = {}, {}, {}
         for k, by_seed in self.fits.items():
             vals = np.array([quantity(s) for s in by_seed.values()], dtype=float)
             vals = vals[np.isfinite(vals)]
             seeds[k] = int(vals.size)
-            if vals.size < min_seeds:
-                sd[k] = math.nan
-                continue
-            s = float(vals.std(ddof=1))
-            sd[k] = s / abs(float(vals.mean())) if relative else s
-        return FoldNoise(sd, seeds, min_seeds)
+            v = math.nan
+            if vals.size >= 2:
+                v = float(vals.std(ddof=1))
+                v = v / abs(float(vals.mean())) if relative else v
+            sd[k] = v if vals.size >= min_seeds else math.nan
+            if vals.size < min_seeds and math.isfinite(v):
+                few[k] = v
+        return FoldNoise(sd, seeds, min_seeds, few=few)
 
     def seeds_of(self, fold: int) -> list[int]:
         return sorted(self.fits.get(fold, {}))

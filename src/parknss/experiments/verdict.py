@@ -43,23 +43,30 @@ def sample_sd(values: Sequence[float]) -> float:
 @dataclass
 class FoldNoise:
     """The seed spread of one pair's effect per fold (fractions): ``sd[k]`` where fold k has
-    at least ``min_seeds`` seeds (``seeds[k]``), and the folds that borrow the pooled
-    value (root mean square over the measured folds) because they have fewer."""
+    at least ``min_seeds`` seeds (``seeds[k]``, NaN otherwise). A fold with fewer borrows
+    the pooled value (root mean square over the measured folds), or its own estimate from
+    two seeds (``few[k]``) where that is larger: never a narrower floor than its own
+    seeds show."""
 
     sd: dict[int, float]
     seeds: dict[int, int]
     min_seeds: int = 3
     source: str = "measured"
     prior: float = math.nan  # the pooled value where no fold is measured (e.g. the paper's)
+    few: dict[int, float] = field(default_factory=dict)
 
     def pooled(self) -> float:
         vals = [v for v in self.sd.values() if math.isfinite(v)]
         return math.sqrt(sum(v * v for v in vals) / len(vals)) if vals else self.prior
 
     def of(self, fold: int) -> float:
-        """The fold's own spread, else the pooled one (NaN: no floor at all)."""
+        """The fold's own spread, else the larger of the pooled one and its two-seed
+        estimate (NaN: no floor at all)."""
         v = self.sd.get(fold, math.nan)
-        return v if math.isfinite(v) else self.pooled()
+        if math.isfinite(v):
+            return v
+        got = [x for x in (self.pooled(), self.few.get(fold, math.nan)) if math.isfinite(x)]
+        return max(got) if got else math.nan
 
     def describe(self) -> str:
         own = ", ".join(f"f{k} {100 * v:.1f} % ({self.seeds.get(k, 0)})"
@@ -67,8 +74,10 @@ class FoldNoise:
         few = sorted(k for k in self.seeds if not math.isfinite(self.sd.get(k, math.nan)))
         text = f"seed sd per fold (seeds) {own or 'none'}"
         if few:
-            text += (f"; fold {'/'.join(map(str, few))} < {self.min_seeds} seeds: pooled "
-                     f"{100 * self.pooled():.1f} %")
+            borrowed = ", ".join(f"f{k} {100 * self.of(k):.1f} % ({self.seeds.get(k, 0)})"
+                                 for k in few)
+            text += (f"; < {self.min_seeds} seeds, the larger of pooled "
+                     f"{100 * self.pooled():.1f} % and two seeds': {borrowed}")
         return text if self.source == "measured" else f"{text} ({self.source})"
 
 
