@@ -122,12 +122,14 @@ def limiter_artefact(ctx: RunContext) -> ArtefactResult:
 @register("seed_noise", "Seed-noise floor", "§IV-B, §V-A")
 def seed_noise_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.findings import seed_noise_findings
-    from parknss.experiments.study_tables import seed_noise_tables
+    from parknss.experiments.study_tables import floor_table, seed_noise_tables
     from parknss.report.study_figures import draw_seed_noise
 
     res = seed_noise_result(ctx)
     fig = draw_seed_noise(res, ctx.out_dir / "seed_noise.png")
-    return ArtefactResult(seed_noise_tables(res), [fig], seed_noise_findings(res, judge_of(ctx)))
+    judge = judge_of(ctx)
+    return ArtefactResult([*seed_noise_tables(res), floor_table(judge)], [fig],
+                          seed_noise_findings(res, judge))
 
 
 @register("learning_curve", "Learning curve (leave-r-repeats-out)", "§V-A, learning-curve fig.")
