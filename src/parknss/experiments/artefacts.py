@@ -222,7 +222,7 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
     # the verdicts on the floor fits this run has, else those stored (none fitted for them)
     judge = judge_of(ctx, fit="seed_noise" in ctx.memo)
     found = [*judged(judge, lambda j: table2_findings(res, j)), seed_spread_finding(
-        res, ctx.memo.get("seed_noise"), ctx.experiments_config().same_order)]
+        res, ctx.memo.get("seed_noise"), ctx.experiments_config().same_order, judge)]
     fold0 = res.folds["nss"][0]
     model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
                       if d and (Path(d) / "model.json").is_file()), None)

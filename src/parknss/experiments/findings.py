@@ -282,26 +282,37 @@ def table2_findings(res: CVResult, judge: Judge) -> list[Finding]:
 
 
 def seed_spread_finding(cv: CVResult, seeds: SeedNoiseResult | None,
-                        same_order: float) -> Finding:
+                        same_order: float, judge: Judge | None = None) -> Finding:
     """§V-A: retraining one fold's model under other seeds spreads its vx error about as
     much as the folds spread (paper: 0.089 ± 0.019 over the fold-1 seeds, 0.108 ± 0.038 over
-    the folds), so the CV variance is training stochasticity; agrees when the two
-    population stds are within a factor ``same_order`` of each other."""
+    the folds), so the CV variance is training stochasticity. The ratio of the two sample
+    stds with its bootstrap interval (``judge``'s settings; seeds and folds resampled each
+    on their own): agrees when the interval lies within [1/``same_order``, ``same_order``],
+    differs when it lies wholly outside, else cannot tell."""
+    from parknss.experiments.config import VerdictConfig
     from parknss.experiments.cv import mean_std
+    from parknss.experiments.verdict import sd_ratio_interval
 
     claim = ("The seed spread on one fold is of the order of the across-fold spread "
              "(vx 0.089 ± 0.019 vs 0.108 ± 0.038)")
     if seeds is None:
         return Finding(claim, "needs the seed-noise study in the same run", None, NOT_MEASURED)
-    s_mean, s_std = mean_std([s.vx for s in seeds.scores])
-    f_mean, f_std = mean_std(cv.column("nss", "vx_mse_moving_kmh2"))
-    ratio = s_std / f_std if f_std > 0 else math.nan
+    s_vals = [s.vx for s in seeds.scores]
+    f_vals = cv.column("nss", "vx_mse_moving_kmh2")
+    s_mean, s_std = mean_std(s_vals)
+    f_mean, f_std = mean_std(f_vals)
+    cfg = judge.cfg if judge is not None else VerdictConfig()
+    ratio, lo, hi = sd_ratio_interval(s_vals, f_vals, cfg)
     measured = (f"vx over {len(seeds.scores)} seeds ({seeds.split} fold {seeds.index}, "
                 f"{seeds.epochs} epochs) {s_mean:.4g} ± {s_std:.3g}; over the folds "
-                f"{f_mean:.4g} ± {f_std:.3g} (ratio {ratio:.2f}, same order within "
-                f"x{same_order:g})")
-    agrees = 1 / same_order <= ratio <= same_order if math.isfinite(ratio) else None
-    return Finding(claim, measured, agrees, "not finite")
+                f"{f_mean:.4g} ± {f_std:.3g} (ratio {ratio:.2f} [{lo:.2f}, {hi:.2f}], "
+                f"same order within x{same_order:g}; ddof 1)")
+    read = Claim("within", math.log(same_order)).read(
+        *(math.log(x) if x > 0 else -math.inf for x in (lo, hi))) \
+        if math.isfinite(lo) and math.isfinite(hi) else None
+    why = (f"cannot tell at this budget (sd ratio {ratio:.2f}, interval [{lo:.2f}, {hi:.2f}])"
+           if math.isfinite(ratio) else "not finite")
+    return Finding(claim, measured, read, why)
 
 
 def seed_noise_findings(res: SeedNoiseResult, judge: Judge | None = None) -> list[Finding]:

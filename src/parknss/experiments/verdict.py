@@ -195,6 +195,25 @@ def estimate_unpaired(a: Sequence[float], b: Sequence[float], cv: float,
                   int(a.size + b.size))
 
 
+def sd_ratio_interval(a: Sequence[float], b: Sequence[float],
+                      cfg: VerdictConfig) -> tuple[float, float, float]:
+    """The ratio of sample sds ``sd(a) / sd(b)`` (ddof = 1) and its percentile bootstrap
+    interval (each sample resampled on its own; replicates whose ``b`` has no spread are
+    dropped); NaNs when either has fewer than two values."""
+    a = np.asarray([v for v in a if math.isfinite(v)], dtype=float)
+    b = np.asarray([v for v in b if math.isfinite(v)], dtype=float)
+    if a.size < 2 or b.size < 2 or b.std() == 0:
+        return math.nan, math.nan, math.nan
+    rng = np.random.default_rng(cfg.seed)
+    ra = a[rng.integers(0, a.size, (cfg.resamples, a.size))].std(axis=1, ddof=1)
+    rb = b[rng.integers(0, b.size, (cfg.resamples, b.size))].std(axis=1, ddof=1)
+    ok = rb > 0
+    ratio = ra[ok] / rb[ok]
+    alpha = (1.0 - cfg.level) / 2
+    return (float(a.std(ddof=1) / b.std(ddof=1)), float(np.quantile(ratio, alpha)),
+            float(np.quantile(ratio, 1 - alpha)))
+
+
 @dataclass
 class Reading:
     """One effect of a finding read against its claim."""
