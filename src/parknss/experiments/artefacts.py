@@ -89,9 +89,9 @@ def judge_of(ctx: RunContext, fit: bool = True):
     if "judge" in ctx.memo:
         return ctx.memo["judge"]
     cfg = ctx.experiments_config()
-    floor = seed_noise_result(ctx).floor if fit else None
-    j = Judge(cfg.verdict, fold_seeds(cfg, ctx.quick, ctx.sweep(), fit), cfg.verdict.metric,
-              floor)
+    seeds = seed_noise_result(ctx) if fit else None
+    j = Judge(cfg.verdict, fold_seeds(cfg, ctx.quick, ctx.sweep(), fit, seeds),
+              cfg.verdict.metric, seeds.floor if seeds is not None else None)
     if fit:
         ctx.memo["judge"] = j
     return j

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from parknss.experiments.config import ExperimentsConfig, VerdictConfig, merge_overrides
-from parknss.experiments.noise import NoiseFloor
+from parknss.experiments.noise import NoiseFloor, SeedNoiseResult
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec, relative_effect
 from parknss.experiments.verdict import Effect, FoldNoise, estimate, estimate_unpaired
 
@@ -79,11 +79,13 @@ class FoldSeeds:
 
 
 def floor_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
-    """(fold, seed, job) of every floor fit (module doc)."""
+    """(fold, seed, job) of every floor fit (module doc): the budget's folds and the
+    seed-noise fold."""
     budget = cfg.budget(quick)
     ref = cfg.seed_noise_split
     out = []
-    for k in budget.folds:
+    folds = sorted({*budget.folds, *([ref.index] if ref.split == "cv" else [])})
+    for k in folds:
         seeds = budget.seeds if ref.split == "cv" and ref.index == k else budget.floor_seeds
         for s in seeds:
             ov = merge_overrides(budget.study_overrides(), {"train": {"seed": s}})
@@ -91,14 +93,19 @@ def floor_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep):
     return out
 
 
-def fold_seeds(cfg: ExperimentsConfig, quick: bool, sweep: Sweep, fit: bool = True) -> FoldSeeds:
+def fold_seeds(cfg: ExperimentsConfig, quick: bool, sweep: Sweep, fit: bool = True,
+               known: SeedNoiseResult | None = None) -> FoldSeeds:
     """The floor fits: all of them (fitted where missing) when ``fit`` and the sweep may
-    fit; else those the result store holds (none without a store)."""
+    fit; else those the result store holds (none without a store). ``known``: the
+    seed-noise study's result, whose fold is then taken from it (not run again)."""
     plan = floor_jobs(cfg, quick, sweep)
     fits: dict[int, dict[int, FoldScore]] = {}
+    if known is not None and known.split.startswith("cv"):
+        fits[known.index] = dict(zip(known.seeds, known.scores, strict=True))
+        plan = [p for p in plan if p[0] != known.index]
     store = sweep.store
     if fit and (store is None or store.fit_missing):
-        results = sweep.run([p[-1] for p in plan], "floor")
+        results = sweep.run([p[-1] for p in plan], "floor") if plan else []
     else:
         got = [store.get(job) if store is not None else (False, None) for *_, job in plan]
         results = [res if hit else None for hit, res in got]
