@@ -263,3 +263,19 @@ def test_the_shipped_schedule_axis_runs_at_a_reduced_lr_its_cosine_row_a_loss_fi
     rows = plan_rows(cfg, False, Sweep(data=data, progress=False), ("ablations",))
     schedule, loss = _ids(rows["ablations: lr schedule"]), _ids(rows["ablations: loss"])
     assert len(schedule & loss) == len(cfg.budget(False).ablation_folds)  # the cosine row
+
+
+def test_the_floor_row_is_the_other_folds_seeds_and_seed_0_is_the_limiter_fit(tiny):
+    data, cfg = tiny
+    sweep = Sweep(data=data, progress=False)
+    b = cfg.budget(False)
+    floor = study_jobs("floor", cfg, False, sweep)
+    others = [k for k in b.folds if k != cfg.seed_noise_split.index]
+    assert len(floor) == len(others) * len(b.floor_seeds)
+    assert not _ids(floor) & _ids(study_jobs("seed-noise", cfg, False, sweep))
+    # seed 0 of a fold's floor is that fold's deployed-configuration fit (the limiter's)
+    limiter = {j.kwargs["index"]: j for j in study_jobs("limiter", cfg, False, sweep)}
+    seed0 = [j for j in floor if "seed" not in j.kwargs["overrides"].get("train", {})]
+    assert len(seed0) == len(others)
+    for j in seed0:  # the same arguments: the stored limiter fit answers it (ALIASES)
+        assert j.kwargs == limiter[j.kwargs["index"]].kwargs

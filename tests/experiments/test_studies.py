@@ -229,7 +229,9 @@ def test_a_stored_only_table3_builds_the_stored_axes_and_names_the_rest(tiny, tm
     assert rows[-2][:2] == ["loss", "not measured: 3 of 4 fits are not stored"]
     assert all(c.strip() for c in table.columns)  # no blank header
     assert {"vx [(km/h)²]", "ω_z [(°/s)²]", "vx vs truth [(km/h)²]"} <= set(table.columns)
-    found = {f.claim: f for f in ablation_findings(res)}
+    from parknss.experiments.judge import judge_from_floor
+
+    found = {f.claim: f for f in ablation_findings(res, judge_from_floor(floor, cfg.verdict))}
     loss = next(f for c, f in found.items() if c.startswith("MAE"))
     assert loss.verdict == "not measured" and "3 of 4 fits are not stored" in loss.measured
     assert next(f for c, f in found.items() if c.startswith("The residual")).verdict != (

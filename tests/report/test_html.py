@@ -58,3 +58,17 @@ def test_findings_link_to_sections_and_cells_align_by_type(tmp_path):
     heads = [text for tag, _, text in page.cells if tag == "th"]
     assert "section" in heads and all(h.strip() for h in heads)
 
+
+
+def test_a_findings_verdict_on_the_second_metric_is_shown_under_its_own(tmp_path):
+    f = Finding("Windows", "10 % padding -5.6 % [-22.3, +11.0]", None,
+                "cannot tell at this budget (10 % padding vx: effect -5.6 %, interval "
+                "[-22.3, +11.0] %)", beside="full trajectory: differs")
+    res = SimpleNamespace(findings=[f, Finding("MAE", "x", True)], tables=[], figures=[],
+                          notes="", wall_s=1.0)
+    art = SimpleNamespace(name="table3", title="Table III", paper_ref="§V-C")
+    page = _Cells()
+    page.feed(write_report(tmp_path / "r.html", "report", [(art, res)], {}).read_text())
+    verdicts = [t for tag, a, t in page.cells if tag == "td" and a.get("class") in ("na", "yes")]
+    assert verdicts[0].startswith("cannot tell at this budget (10 % padding vx")
+    assert verdicts[0].endswith("full trajectory: differs") and verdicts[1] == "agrees"

@@ -240,6 +240,12 @@ def ablation_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job
 
 
 def _metric(res: dict, key: str) -> float:
+    """The held-out error ``key`` of a fold result, or for ``criterion`` the fit's best
+    smoothed selection criterion (on the trials it chose its checkpoint on: the inner
+    split under ``train.selection: inner``, so the LR is never chosen on scored trials)."""
+    if key == "criterion":
+        smooth = [x for x in (res.get("history") or {}).get("smooth") or [] if x is not None]
+        return min(smooth) if smooth else math.nan
     v = res["errors"].get(key)
     return math.nan if v is None else float(v)
 

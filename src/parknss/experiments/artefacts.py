@@ -80,6 +80,30 @@ def seed_noise_result(ctx: RunContext):
     return ctx.memo["seed_noise"]
 
 
+def judge_of(ctx: RunContext, fit: bool = True):
+    """The run's :class:`~parknss.experiments.judge.Judge`: the floor fits of every fold
+    (``fit``: fitted where missing, else only those stored) and the seed-noise floor as
+    the fallback; shared through ctx.memo when it may fit."""
+    from parknss.experiments.judge import Judge, fold_seeds
+
+    if "judge" in ctx.memo:
+        return ctx.memo["judge"]
+    cfg = ctx.experiments_config()
+    seeds = seed_noise_result(ctx) if fit else None
+    j = Judge(cfg.verdict, fold_seeds(cfg, ctx.quick, ctx.sweep(), fit, seeds),
+              cfg.verdict.metric, seeds.floor if seeds is not None else None)
+    if fit:
+        ctx.memo["judge"] = j
+    return j
+
+
+def judged(judge, make):
+    """:func:`parknss.experiments.findings.judged` (findings and their ``beside`` verdicts)."""
+    from parknss.experiments.findings import judged as _judged
+
+    return _judged(judge, make)
+
+
 @register("limiter", "Inference limiter study", "§V-B")
 def limiter_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.findings import limiter_findings
@@ -91,18 +115,21 @@ def limiter_artefact(ctx: RunContext) -> ArtefactResult:
     res = limiter_study(ctx.experiments_config(), ctx.quick, ctx.sweep(),
                         lambda: seed_noise_result(ctx).floor)
     fig = draw_limiter(res, ctx.out_dir / "limiter.png")
-    return ArtefactResult(limiter_tables(res), [fig], limiter_findings(res))
+    found = judged(judge_of(ctx), lambda j: limiter_findings(res, j))
+    return ArtefactResult(limiter_tables(res), [fig], found)
 
 
 @register("seed_noise", "Seed-noise floor", "§IV-B, §V-A")
 def seed_noise_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.findings import seed_noise_findings
-    from parknss.experiments.study_tables import seed_noise_tables
+    from parknss.experiments.study_tables import floor_table, seed_noise_tables
     from parknss.report.study_figures import draw_seed_noise
 
     res = seed_noise_result(ctx)
     fig = draw_seed_noise(res, ctx.out_dir / "seed_noise.png")
-    return ArtefactResult(seed_noise_tables(res), [fig], seed_noise_findings(res))
+    judge = judge_of(ctx)
+    return ArtefactResult([*seed_noise_tables(res), floor_table(judge)], [fig],
+                          seed_noise_findings(res, judge))
 
 
 @register("learning_curve", "Learning curve (leave-r-repeats-out)", "§V-A, learning-curve fig.")
@@ -113,9 +140,10 @@ def learning_curve_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.report.study_figures import draw_learning_curve
 
     res = learning_curve(ctx.experiments_config(), ctx.quick, ctx.sweep())
-    floor = seed_noise_result(ctx).floor  # after: a stored-only run names the curve's gaps
+    judge = judge_of(ctx)  # after: a stored-only run names the curve's gaps
     fig = draw_learning_curve(res, ctx.out_dir / "learning_curve.png")
-    return ArtefactResult(learning_curve_tables(res), [fig], learning_curve_findings(res, floor))
+    found = judged(judge, lambda j: learning_curve_findings(res, j))
+    return ArtefactResult(learning_curve_tables(res), [fig], found)
 
 
 @register("table3", "Table III: design ablations", "§V-C, Table III")
@@ -132,7 +160,8 @@ def table3_artefact(ctx: RunContext) -> ArtefactResult:
         "Capacity: augmented latent states and residual + layer-norm state nets are not "
         "implemented in parknss.nss; only smaller plain nets are compared."
     )
-    return ArtefactResult(ablation_tables(res), [fig], ablation_findings(res), notes)
+    found = judged(judge_of(ctx), lambda j: ablation_findings(res, j))
+    return ArtefactResult(ablation_tables(res), [fig], found, notes)
 
 
 @register("fig4", "Fig. 4: convergence probe", "§IV-B, Fig. 4")
@@ -189,9 +218,11 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
         ["", *(label for _, label in COLUMNS)],
         rows,
     )
-    # the seed spread beside the fold spread when this run has measured it (reproduce all)
-    found = [*table2_findings(res), seed_spread_finding(
-        res, ctx.memo.get("seed_noise"), ctx.experiments_config().same_order)]
+    # the seed spread beside the fold spread when this run has measured it (reproduce all);
+    # the verdicts on the floor fits this run has, else those stored (none fitted for them)
+    judge = judge_of(ctx, fit="seed_noise" in ctx.memo)
+    found = [*judged(judge, lambda j: table2_findings(res, j)), seed_spread_finding(
+        res, ctx.memo.get("seed_noise"), ctx.experiments_config().same_order, judge)]
     fold0 = res.folds["nss"][0]
     model_dir = next((Path(d) for d in (fold0.get("model_dir"), models / "nss_fold0")
                       if d and (Path(d) / "model.json").is_file()), None)

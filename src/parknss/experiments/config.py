@@ -38,6 +38,8 @@ class Budget(StrictModel):
     folds: list[int] = Field([0, 1, 2, 3], description="folds of each split")
     ablation_folds: list[int] = Field([0, 1, 2, 3], description="CV folds per ablation option")
     seeds: list[int] = Field([0, 1, 2, 3, 4], description="seeds of the noise-floor study")
+    floor_seeds: list[int] = Field(
+        [0, 1, 2], description="seeds of the per-fold floor on the other folds of `folds`")
     loss_lrs: list[float] = Field([1e-3, 2e-3, 4e-3], description="LR sweep per loss")
     sim_cells: list[int] | None = Field(None, description="Table V cells (None: all 36)")
     sim_scene: int = Field(0, ge=0, description="grid cell drawn in Figs. 8/9")
@@ -125,6 +127,23 @@ class AblationAxis(StrictModel):
         return v
 
 
+class VerdictConfig(StrictModel):
+    """How a finding is decided (:mod:`parknss.experiments.verdict`)."""
+
+    resamples: int = Field(2000, ge=100, description="paired-bootstrap resamples per effect")
+    seed: int = Field(0, description="seed of the bootstrap's generator")
+    level: float = Field(0.95, gt=0.5, lt=1.0, description="confidence level of the intervals")
+    min_seeds: int = Field(
+        3, ge=2, description="seeds a fold needs for its own floor (fewer: the pooled floor)")
+    tie_margin: float = Field(
+        0.05, gt=0.0, description="|effect| of a claim of no effect that gives no tolerance")
+    metric: Literal["moving", "full", "truth_full"] = Field(
+        "moving", description="the metric verdicts are read on: moving (the paper's, "
+        "measured |vx| >= 0.5 km/h), full (every sample), truth_full (every sample, truth)")
+    beside: Literal["moving", "full", "truth_full"] | None = Field(
+        "full", description="a second metric whose verdicts the report shows beside")
+
+
 class StoreConfig(StrictModel):
     """The result store (:mod:`parknss.experiments.store`)."""
 
@@ -161,6 +180,7 @@ class ExperimentsConfig(StrictModel):
     full: Budget = Budget()
     quick: Budget = Budget(epochs=4, convergence_epochs=8, folds=[0, 1], ablation_folds=[0])
     axes: list[AblationAxis] = Field(default_factory=list)
+    verdict: VerdictConfig = VerdictConfig()
     store: StoreConfig = StoreConfig()
 
     def digest(self) -> str:

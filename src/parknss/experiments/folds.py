@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from parknss.data.splits import Fold, FoldPlan, cv_plan, leave_r_out_plan
-from parknss.data.trial import Campaign
+from parknss.data.trial import Campaign, Trial
 from parknss.errors import ConfigError
 from parknss.metrics.errors import logged_and_truth_errors
 from parknss.nss.campaigns import load_campaign
@@ -143,14 +143,17 @@ def fold_job(
 
     cfg = fold_config(config, overrides)
     resume = state_dir is not None and (Path(state_dir) / "train_state.json").is_file()
-    res = fit(train, val, cfg, geometry_of(campaign), progress=progress,
+    fit_on, select_on = train, val  # the paper's protocol: the checkpoint on the scored trials
+    if cfg.train.selection == "inner":
+        fit_on, select_on = inner_split(train)
+    res = fit(fit_on, select_on, cfg, geometry_of(campaign), progress=progress,
               out_dir=Path(state_dir) if state_dir is not None else None, resume=resume)
     logged, truth = logged_and_truth_errors(predict_trials(res.model, val), val, res.window_length)
     h = res.history
     saved = None
     if save_dir is not None:
         saved = str(save_model(Path(save_dir), res.model, cfg, res.training_meta()))
-    return FoldResult(
+    doc = FoldResult(
         *head,
         logged,
         truth,
@@ -170,6 +173,27 @@ def fold_job(
         cpu_s=res.cpu_s,
         model_dir=saved,
     ).to_json()
+    if select_on is not val:
+        doc["fitted_on"], doc["selected_on"] = [t.id for t in fit_on], [t.id for t in select_on]
+    return doc
+
+
+def inner_split(train: list[Trial]) -> tuple[list[Trial], list[Trial]]:
+    """The training trials split for inner-validation selection: the last trial of each
+    maneuver class that has at least two held out for choosing the checkpoint, the rest
+    fitted (unlabelled trials count as one class). Deterministic; a ConfigError when no
+    class has two trials."""
+    last: dict[str, int] = {}
+    count: dict[str, int] = {}
+    for i, tr in enumerate(train):
+        last[tr.maneuver] = i
+        count[tr.maneuver] = count.get(tr.maneuver, 0) + 1
+    held = {i for c, i in last.items() if count[c] >= 2}
+    if not held:
+        raise ConfigError("train.selection=inner needs a maneuver class with two training "
+                          "trials to hold one out")
+    return ([tr for i, tr in enumerate(train) if i not in held],
+            [tr for i, tr in enumerate(train) if i in held])
 
 
 VARIANTS: tuple[str, ...] = ("none", "reconstructed", "residual")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig
@@ -38,6 +38,7 @@ class VariantScore:
     vx_reverse: float
     yaw: float
     per_fold_vx: list[float]
+    per_fold_errors: list[dict] = field(default_factory=list)  # OpenLoopErrors JSON per fold
 
 
 @dataclass
@@ -101,6 +102,7 @@ def limiter_study(
                 vx_reverse=nanmean([_get(e, "vx_mse_reverse_kmh2") for e in errs]),
                 yaw=nanmean([_get(e, "yaw_mse_moving_degs2") for e in errs]),
                 per_fold_vx=[_get(e, "vx_mse_moving_kmh2") for e in errs],
+                per_fold_errors=errs,
             )
         )
     return LimiterResult(scores, floor, cfg.divergence_factor, list(budget.folds), budget.epochs)

@@ -1,11 +1,11 @@
 """What each study fits, and what the fits the result store lacks will cost.
 
 Every study builds its fits with one function (``seed_jobs``, ``curve_jobs``,
-``ablation_jobs``, ``limiter_jobs``, ``convergence_jobs``, ``tta_jobs`` and Table II's
-``cv_jobs``); :func:`study_jobs` collects them per study, so the plan is the run's own
-job list, not a recount. A fit several studies share (the seed-noise fits and the floor,
-Fig. 4 and the fold-0 Table II and time-to-accuracy paper fits) is one entry of the
-store and is counted once in the total.
+``ablation_jobs``, ``limiter_jobs``, ``convergence_jobs``, ``tta_jobs``, the verdicts'
+per-fold ``floor_jobs`` and Table II's ``cv_jobs``); :func:`study_jobs` collects them
+per study, so the plan is the run's own job list, not a recount. A fit several studies
+share (the seed-noise fits and the floor, Fig. 4 and the fold-0 Table II and
+time-to-accuracy paper fits) is one entry of the store and is counted once in the total.
 
 Cost of a fit, CPU s (one torch thread): from its resolved NSS config and training
 trials,
@@ -55,6 +55,7 @@ PLANNED: tuple[str, ...] = (
     "time_to_accuracy",
     "convergence",
     "seed-noise",
+    "floor",
     "learning-curve",
     "limiter",
     "ablations",
@@ -84,6 +85,12 @@ def study_jobs(name: str, cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> 
         from parknss.experiments.noise import seed_jobs
 
         return seed_jobs(cfg, cfg.budget(quick), sweep)
+    if name == "floor":  # the per-fold floor of the verdicts, the seed-noise fold aside
+        from parknss.experiments.judge import floor_jobs
+
+        ref = cfg.seed_noise_split
+        return [j for k, _, j in floor_jobs(cfg, quick, sweep)
+                if not (ref.split == "cv" and k == ref.index)]
     if name == "learning-curve":
         from parknss.experiments.learning_curve import curve_jobs
 

@@ -36,13 +36,15 @@ class Finding:
     """One of the paper's findings beside what this toolkit measured.
 
     ``agrees`` is True/False, or None where the comparison is not decidable; then
-    ``undecided`` says why ("within noise", "not measured", ...).
+    ``undecided`` says why ("cannot tell at this budget (...)", "not measured", ...).
+    ``beside``: the verdict on a second metric, where the report shows one.
     """
 
     claim: str
     measured: str
     agrees: bool | None
-    undecided: str = "within noise"
+    undecided: str = "cannot tell at this budget"
+    beside: str = ""
 
     @property
     def verdict(self) -> str:

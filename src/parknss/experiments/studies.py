@@ -75,6 +75,17 @@ def _floor(spec: str, cfg, quick: bool, sweep, log: Callable[[str], None]):
     return NoiseFloor.load(spec)
 
 
+def _judged(make, floor, cfg, quick: bool, sweep) -> list:
+    """``make(judge)``'s findings (and their verdicts on the ``beside`` metric): the judge
+    reads the per-fold floor fits the store holds (a single study fits none of them) and
+    falls back on ``floor``."""
+    from parknss.experiments.findings import judged
+    from parknss.experiments.judge import Judge, fold_seeds
+
+    seeds = fold_seeds(cfg, quick, sweep, fit=False)
+    return judged(Judge(cfg.verdict, seeds, cfg.verdict.metric, floor), make)
+
+
 @dataclass(frozen=True, kw_only=True)
 class StudyInputs:
     """One study: its ``name`` (one of :data:`STUDIES`), the ``quick`` budget, the folder
@@ -156,26 +167,30 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
             from parknss.experiments.learning_curve import learning_curve
 
             res = learning_curve(cfg, quick, sweep)
-            found = fnd.learning_curve_findings(res, _floor(floor, cfg, quick, sweep, log))
+            fl = _floor(floor, cfg, quick, sweep, log)
+            found = _judged(lambda j: fnd.learning_curve_findings(res, j), fl, cfg, quick, sweep)
             tables = st.learning_curve_tables(res)
             figure = fig.draw_learning_curve(res, out / "learning_curve.png")
         elif name == "seed-noise":
             from parknss.experiments.noise import seed_noise
 
             res = seed_noise(cfg, quick, sweep)
-            tables, found = st.seed_noise_tables(res), fnd.seed_noise_findings(res)
+            tables, found = st.seed_noise_tables(res), _judged(
+                lambda j: fnd.seed_noise_findings(res, j), res.floor, cfg, quick, sweep)
             figure = fig.draw_seed_noise(res, out / "seed_noise.png")
         elif name == "ablations":
             from parknss.experiments.ablations import ablations
 
             res = ablations(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
-            tables, found = st.ablation_tables(res), fnd.ablation_findings(res)
+            tables, found = st.ablation_tables(res), _judged(
+                lambda j: fnd.ablation_findings(res, j), res.floor, cfg, quick, sweep)
             figure = fig.draw_ablations(res, out / "table3_effects.png")
         elif name == "limiter":
             from parknss.experiments.limiter_study import limiter_study
 
             res = limiter_study(cfg, quick, sweep, _floor(floor, cfg, quick, sweep, log))
-            tables, found = st.limiter_tables(res), fnd.limiter_findings(res)
+            tables, found = st.limiter_tables(res), _judged(
+                lambda j: fnd.limiter_findings(res, j), res.floor, cfg, quick, sweep)
             figure = fig.draw_limiter(res, out / "limiter.png")
         else:
             from parknss.experiments.convergence import convergence
@@ -199,7 +214,8 @@ def run_study(inputs: StudyInputs, log: Callable[[str], None] = _quiet) -> Study
             "sources": {"run_cache": tally.cache, "store": tally.store, "fitted": tally.computed},
             "result": res.to_json(),
             "findings": [
-                {"claim": f.claim, "measured": f.measured, "verdict": f.verdict} for f in found
+                {"claim": f.claim, "measured": f.measured, "verdict": f.verdict,
+                 "beside": f.beside} for f in found
             ],
             "figure": str(figure),
             "config": cfg.model_dump(mode="json"),
@@ -221,6 +237,7 @@ def study_text(run: StudyRun) -> str:
     parts = [doc["note"] + "\n"] if not doc["stratified"] else []
     parts += [text_table(t) + "\n" for t in run.tables]
     parts += [f"[{f['verdict']}] {f['claim']}\n    measured: {f['measured']}"
+              + (f"\n    beside: {f['beside']}" if f.get("beside") else "")
               for f in doc["findings"]]
     parts.append(f"wall {doc['wall_s']} s; wrote {doc['json']}, {doc['figure']}")
     return "\n".join(parts)

@@ -88,6 +88,27 @@ def seed_noise_tables(res: SeedNoiseResult) -> list[Table]:
     ]
 
 
+def floor_table(judge) -> Table:
+    """The per-fold seed floor (:class:`~parknss.experiments.judge.Judge`): per CV fold its
+    floor fits and the seed CV (ddof 1) of vx and ω_z on every metric; n/a below two."""
+    from parknss.experiments.judge import METRICS, metric_value
+
+    rows: list[list[Any]] = []
+    for k, by_seed in sorted(judge.seeds.fits.items()):
+        row: list[Any] = [f"fold {k}", ", ".join(map(str, sorted(by_seed)))]
+        for metric in METRICS:
+            for ch in ("vx", "yaw"):
+                noise = judge.seeds.spread(lambda s, m=metric, c=ch: metric_value(s, c, m), 2,
+                                           True)
+                v = noise.sd.get(k, math.nan)
+                row.append("n/a" if not math.isfinite(v) else f"{100 * v:.1f} %")
+        rows.append(row)
+    cols = ["fold", "seeds"] + [f"{m} {ch}" for m in METRICS for ch in ("vx", "ω_z")]
+    return Table(f"Seed floor per fold (CV, ddof 1; a fold with fewer than "
+                 f"{judge.cfg.min_seeds} seeds borrows the pooled floor in the verdicts)",
+                 cols, rows)
+
+
 def ablation_tables(res: AblationResult) -> list[Table]:
     fl = res.floor
     rows: list[list[Any]] = []

@@ -122,7 +122,9 @@ def _num(v: Any) -> float:
 @dataclass
 class FoldScore:
     """Moving-region errors of one fold: vx (km/h)², yaw (°/s)²; wall and CPU time of the
-    fit, s (CPU NaN when the result lacks it)."""
+    fit, s (CPU NaN when the result lacks it); the full-trajectory errors (every sample,
+    against the logged and the truth channels) and the moving errors within / beyond the
+    training-window horizon (NaN where the result lacks them)."""
 
     vx: float
     vx_reverse: float
@@ -134,6 +136,14 @@ class FoldScore:
     n_train: int
     epochs: int | None = None
     cpu_s: float = math.nan
+    vx_full: float = math.nan
+    yaw_full: float = math.nan
+    vx_truth_full: float = math.nan
+    yaw_truth_full: float = math.nan
+    vx_within: float = math.nan
+    vx_beyond: float = math.nan
+    yaw_within: float = math.nan
+    yaw_beyond: float = math.nan
 
     @property
     def wall_per_epoch(self) -> float:
@@ -159,6 +169,14 @@ class FoldScore:
             n_train=len(res["train"]),
             epochs=res.get("epochs"),
             cpu_s=_num(res.get("cpu_s")),
+            vx_full=_num(e.get("vx_mse_full_kmh2")),
+            yaw_full=_num(e.get("yaw_mse_full_degs2")),
+            vx_truth_full=_num(t.get("vx_mse_full_kmh2")),
+            yaw_truth_full=_num(t.get("yaw_mse_full_degs2")),
+            vx_within=_num(e.get("vx_mse_within_kmh2")),
+            vx_beyond=_num(e.get("vx_mse_beyond_kmh2")),
+            yaw_within=_num(e.get("yaw_mse_within_degs2")),
+            yaw_beyond=_num(e.get("yaw_mse_beyond_degs2")),
         )
 
 

@@ -89,6 +89,10 @@ class TrainConfig(StrictModel):
         20, ge=1, description="trailing moving average over this many criterion points"
     )
     checkpoint_every: int = Field(50, ge=1, description="save the resumable state every N")
+    selection: Literal["scored", "inner"] = Field(
+        "scored", description="where a fold fit's checkpoint is chosen: scored = on the "
+        "fold's held-out trials, which are also scored (the paper's protocol); inner = on "
+        "one training trial per maneuver class held out of the fit, never on a scored trial")
     dtype: Literal["float32", "float64"] = "float32"
 
 
@@ -160,6 +164,8 @@ def fit_identity(cfg: NSSConfig) -> dict:
     (neither reads the other's). Resume fingerprints and result-store keys use it."""
     doc = cfg.model_dump(mode="json")
     doc["train"].pop("threads", None)
+    if cfg.train.selection == "scored":  # the default keeps the keys it had without it
+        doc["train"].pop("selection", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)

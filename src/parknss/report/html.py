@@ -44,7 +44,8 @@ def _finding_row(f, art) -> str:
     cls = {True: "yes", False: "no", None: "na"}[f.agrees]
     return (
         f"<tr><td>{html.escape(f.claim)}</td><td>{html.escape(f.measured)}</td>"
-        f'<td class="{cls}">{html.escape(f.verdict)}</td>'
+        f'<td class="{cls}">{html.escape(f.verdict)}'
+        f"{'<br><small>' + html.escape(f.beside) + '</small>' if f.beside else ''}</td>"
         f"<td><a href='#{html.escape(art.name)}'>{html.escape(art.title)}</a></td></tr>"
     )
 
