@@ -88,6 +88,7 @@ LIGHT_COMMANDS = {
     # scipy.linalg: no SciPy at all
     "plan --scene 26 --json --out {tmp}/plan": ("numpy", "casadi", "matplotlib"),
     "plan --scene 26 --no-refine --json --out {tmp}/coarse": ("numpy", "casadi", "matplotlib"),
+    "plan --scene 26 --no-figure --json --out {tmp}/bare": ("numpy", "casadi"),
 }
 
 _RUN = """
