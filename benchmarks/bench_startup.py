@@ -5,14 +5,14 @@
 Runs, interleaved ``--repeats`` times each as a fresh process: the bare interpreter
 (``python -c pass``), ``parknss --help``, ``parknss plan --help``, importing the ISO/TS
 18571 module, and ``parknss plan --scene 26 --json`` (planning, refinement and the figure
-into a temporary folder); and, inside this process, the planning of cell 26 alone
-(``plan_named_scene``, imports already paid). Prints the median and range of each wall
-time and the ratios the start-up goals are about: each command against the bare
-interpreter, and the whole ``plan`` process against its planning, and each process's CPU
-time (user + system; on a loaded machine steadier than the wall time). ``--baseline SRC``
-also runs ``--help`` and ``plan`` from another checkout's ``src`` (main's), interleaved,
-and prints baseline / this. The machine's load is printed with them: on a shared machine
-every absolute time is inflated, ratios less so.
+into a temporary folder; and again with ``--no-figure``); and, inside this process, the
+planning of cell 26 alone (``plan_named_scene``, imports already paid). Prints the median
+and range of each wall time and the ratios the start-up goals are about: each command
+against the bare interpreter, and the whole ``plan`` process against its planning, and
+each process's CPU time (user + system; on a loaded machine steadier than the wall time).
+``--baseline SRC`` also runs ``--help`` and ``plan`` from another checkout's ``src``
+(main's), interleaved, and prints baseline / this. The machine's load is printed with
+them: on a shared machine every absolute time is inflated, ratios less so.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ CASES: dict[str, list[str]] = {
     "import parknss.metrics.iso18571": [PY, "-c", "import parknss.metrics.iso18571"],
 }
 PLAN = "parknss plan --scene 26 --json"
+BARE = "parknss plan --scene 26 --json --no-figure"
 
 
 def _wall(cmd: list[str], cpu: list[float] | None = None, env: dict | None = None) -> float:
@@ -72,7 +73,7 @@ def main() -> int:
     ap.add_argument("--baseline", metavar="SRC", help="another checkout's src/ (e.g. main's): "
                     "its --help and plan runs interleaved with these, as ratios")
     args = ap.parse_args()
-    names = [*CASES, PLAN]
+    names = [*CASES, PLAN, BARE]
     if args.baseline:
         names += [f"{k} [baseline]" for k in ("parknss --help", PLAN)]
     times: dict[str, list[float]] = {k: [] for k in names}
@@ -84,6 +85,8 @@ def main() -> int:
                 times[name].append(_wall(cmd, cpus[name]))
             plan = [PY, "-m", "parknss.cli", "plan", "--scene", "26", "--json", "--out"]
             times[PLAN].append(_wall([*plan, str(Path(tmp) / f"plan{r}")], cpus[PLAN]))
+            times[BARE].append(_wall([*plan, str(Path(tmp) / f"bare{r}"), "--no-figure"],
+                                     cpus[BARE]))
             if args.baseline:
                 env = {**os.environ, "PYTHONPATH": args.baseline}
                 for name, cmd in (("parknss --help", CASES["parknss --help"]),
