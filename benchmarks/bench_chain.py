@@ -100,11 +100,13 @@ def main() -> None:
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
         slave.exitInitializationMode()
-        vrs = [0, 1, 2, 3]
+        gears = cm[:, 0].astype(int).tolist()  # gear is an FMI Integer (vr 0)
+        reals = cm[:, 1:].tolist()
 
         def fmi_run():
             for k in range(n):
-                slave.setReal(vrs, list(cm[k]))
+                slave.setInteger([0], [gears[k]])
+                slave.setReal([1, 2, 3], reals[k])
                 slave.doStep(currentCommunicationPoint=k * 0.01, communicationStepSize=0.01)
 
         res["fmi2_dostep"] = _per_step(fmi_run, n, repeats=3)

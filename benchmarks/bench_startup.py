@@ -1,15 +1,18 @@
 """Start-up of the command line: whole-process times of light commands, in one run.
 
-    python benchmarks/bench_startup.py [--repeats 5] [--json]
+    python benchmarks/bench_startup.py [--repeats 5] [--json] [--baseline ../main/src]
 
 Runs, interleaved ``--repeats`` times each as a fresh process: the bare interpreter
 (``python -c pass``), ``parknss --help``, ``parknss plan --help``, importing the ISO/TS
 18571 module, and ``parknss plan --scene 26 --json`` (planning, refinement and the figure
-into a temporary folder); and, inside this process, the planning of cell 26 alone
-(``plan_named_scene``, imports already paid). Prints the median and range of each wall
-time and the ratios the start-up goals are about: each command against the bare
-interpreter, and the whole ``plan`` process against its planning. The machine's load is
-printed with them: on a shared machine every absolute time is inflated, ratios less so.
+into a temporary folder; and again with ``--no-figure``); and, inside this process, the
+planning of cell 26 alone (``plan_named_scene``, imports already paid). Prints the median
+and range of each wall time and the ratios the start-up goals are about: each command
+against the bare interpreter, and the whole ``plan`` process against its planning, and
+each process's CPU time (user + system; on a loaded machine steadier than the wall time).
+``--baseline SRC`` also runs ``--help`` and ``plan`` from another checkout's ``src``
+(main's), interleaved, and prints baseline / this. The machine's load is printed with
+them: on a shared machine every absolute time is inflated, ratios less so.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -33,12 +37,21 @@ CASES: dict[str, list[str]] = {
     "import parknss.metrics.iso18571": [PY, "-c", "import parknss.metrics.iso18571"],
 }
 PLAN = "parknss plan --scene 26 --json"
+BARE = "parknss plan --scene 26 --json --no-figure"
 
 
-def _wall(cmd: list[str]) -> float:
+def _wall(cmd: list[str], cpu: list[float] | None = None, env: dict | None = None) -> float:
+    """Wall time (s) of one fresh process; its CPU time (user + system, s) appended to
+    ``cpu``: on a loaded machine the CPU time is the steadier of the two."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                   env=env)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if cpu is not None:
+        cpu.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
+    return wall
 
 
 def _planning_s() -> float:
@@ -57,23 +70,37 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--baseline", metavar="SRC", help="another checkout's src/ (e.g. main's): "
+                    "its --help and plan runs interleaved with these, as ratios")
     args = ap.parse_args()
-    times: dict[str, list[float]] = {k: [] for k in [*CASES, PLAN]}
+    names = [*CASES, PLAN, BARE]
+    if args.baseline:
+        names += [f"{k} [baseline]" for k in ("parknss --help", PLAN)]
+    times: dict[str, list[float]] = {k: [] for k in names}
+    cpus: dict[str, list[float]] = {k: [] for k in times}
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.repeats):
             for name, cmd in CASES.items():
-                times[name].append(_wall(cmd))
-            out = Path(tmp) / f"plan{r}"
-            times[PLAN].append(_wall([PY, "-m", "parknss.cli", "plan", "--scene", "26",
-                                      "--json", "--out", str(out)]))
+                times[name].append(_wall(cmd, cpus[name]))
+            plan = [PY, "-m", "parknss.cli", "plan", "--scene", "26", "--json", "--out"]
+            times[PLAN].append(_wall([*plan, str(Path(tmp) / f"plan{r}")], cpus[PLAN]))
+            times[BARE].append(_wall([*plan, str(Path(tmp) / f"bare{r}"), "--no-figure"],
+                                     cpus[BARE]))
+            if args.baseline:
+                env = {**os.environ, "PYTHONPATH": args.baseline}
+                for name, cmd in (("parknss --help", CASES["parknss --help"]),
+                                  (PLAN, [*plan, str(Path(tmp) / f"base{r}")])):
+                    key = f"{name} [baseline]"
+                    times[key].append(_wall(cmd, cpus[key], env))
     planning = [_planning_s() for _ in range(max(1, args.repeats // 2))]
     load1 = os.getloadavg()[0]
     med = {k: float(np.median(v)) for k, v in times.items()}
     plan_alone = float(np.median(planning))
     doc = {
         "repeats": args.repeats, "load_average": [load0, load1], "cores": os.cpu_count(),
-        "median_s": med, "range_s": {k: [min(v), max(v)] for k, v in times.items()},
+        "median_s": med, "median_cpu_s": {k: float(np.median(v)) for k, v in cpus.items()},
+        "range_s": {k: [min(v), max(v)] for k, v in times.items()},
         "planning_in_process_s": plan_alone,
         "ratio_to_bare_python": {k: v / med["python -c pass"] for k, v in med.items()},
         "plan_process_over_planning": med[PLAN] / plan_alone,
@@ -85,7 +112,13 @@ def main() -> int:
           f"{load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores")
     for k, v in times.items():
         print(f"  {k:34s} {med[k]:6.3f} s [{min(v):.3f}-{max(v):.3f}]  "
-              f"{doc['ratio_to_bare_python'][k]:6.1f}x bare python")
+              f"{doc['ratio_to_bare_python'][k]:6.1f}x bare python; CPU "
+              f"{doc['median_cpu_s'][k]:6.3f} s")
+    for name in ("parknss --help", PLAN):
+        if f"{name} [baseline]" in med:
+            b = f"{name} [baseline]"
+            print(f"  {name}: baseline / this {med[b] / med[name]:.2f}x wall, "
+                  f"{doc['median_cpu_s'][b] / doc['median_cpu_s'][name]:.2f}x CPU")
     print(f"  planning cell 26 in process        {plan_alone:6.3f} s; the whole plan process "
           f"is {doc['plan_process_over_planning']:.2f}x its planning")
     return 0

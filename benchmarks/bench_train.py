@@ -18,8 +18,8 @@ with identical initial weights, data and loss code, in the same run, interleaved
 epoch, with one intra-op thread. Readout, output network and loss are the same code in
 both (applied to the whole stacked trajectory). Prints the seconds per epoch of each
 (best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
-both (they train identically up to float32 rounding), and last the ratio eager / fused
-of the best times.
+both (they train identically up to float32 rounding), the ratio eager / fused of the
+best times and, last, the median and range of the ratios of paired (back-to-back) epochs.
 """
 
 from __future__ import annotations
@@ -119,6 +119,9 @@ def main() -> None:
             f"over {len(r.times)} epochs; losses {', '.join(f'{v:.7f}' for v in r.losses)}"
         )
     print(f"speedup eager/fused: {best['eager'] / best['fused']:.2f}x")
+    paired = [e / f for e, f in zip(runners["eager"].times, runners["fused"].times, strict=True)]
+    print(f"paired epochs eager/fused: median {statistics.median(paired):.2f}x "
+          f"[{min(paired):.2f}-{max(paired):.2f}] over {len(paired)} pairs")
 
 
 if __name__ == "__main__":

@@ -36,6 +36,19 @@ def test_plan_command_prints_one_json_document_and_draws(tmp_path, capsys):
     assert json.loads((tmp_path / "plan_perpendicular-left-t1-open.json").read_text()) == out
 
 
+def test_no_figure_plans_the_same_and_draws_nothing(tmp_path, capsys):
+    args = ["plan", "--scene", "14", "--json", "--no-refine"]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    drawn = json.loads(capsys.readouterr().out)
+    assert main([*args, "--no-figure", "--out", str(tmp_path / "b")]) == 0
+    bare = json.loads(capsys.readouterr().out)
+    assert bare["figure"] is None and drawn["figure"].endswith(".png")
+    skip = {"figure", "plan_time_s", *TIMING_KEYS}
+    assert {k: v for k, v in bare.items() if k not in skip} == {
+        k: v for k, v in drawn.items() if k not in skip}
+    assert sorted(p.suffix for p in (tmp_path / "b").glob("plan_*")) == [".json"]
+
+
 def test_bad_requests_exit_2_with_one_line(tmp_path, capsys):
     assert main(["plan"]) == 2
     assert main(["plan", "--scene", "77"]) == 2

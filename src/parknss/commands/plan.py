@@ -5,9 +5,10 @@ a CommonRoad XML scenario, a grid cell 0-35, or ``robust:N`` for robustness cell
 an imported scene is also written as scene JSON beside the figure) for the car of
 ``--vehicle`` (default: the car the shipped chain was identified on) exactly as
 ``parknss simulate`` will drive it (:func:`parknss.sim.planner.plan_scene`: the
-closed-loop config's steering reserve and margin), draws it to a PNG and prints a
-summary (or one JSON object). ``--no-reserve`` plans as the planner alone instead (full
-steering lock, planning.yaml's margin): a plan that no other command drives.
+closed-loop config's steering reserve and margin), draws it to a PNG (not with
+``--no-figure``) and prints a summary (or one JSON object). ``--no-reserve`` plans as the
+planner alone instead (full steering lock, planning.yaml's margin): a plan that no other
+command drives.
 ``parknss plan --grid 36`` (``12``: the tuning core, ``252``: the robustness grid) plans
 every cell through the one executor and prints a table (or one JSON list). The figure
 goes to ``--out`` (default ``runs/plan/<scene>``), a run folder refused if it holds
@@ -59,6 +60,9 @@ def register(app: typer.Typer) -> None:
             None, "--vehicle", help="Vehicle YAML (default: the chain's car)."
         ),
         no_refine: bool = typer.Option(False, "--no-refine", help="Coarse path only."),
+        no_figure: bool = typer.Option(
+            False, "--no-figure", help="--scene: no PNG (and no matplotlib import)."
+        ),
         no_reserve: bool = typer.Option(
             False, "--no-reserve", help="Full lock, planning.yaml margin: not what is driven."
         ),
@@ -80,8 +84,9 @@ def register(app: typer.Typer) -> None:
         if scene is not None:
             from parknss.experiments.scenes import plan_one
 
-            summary = plan_one(scene, files, **settings)
-            _log(f"drew {summary['figure']}")
+            summary = plan_one(scene, files, figure=not no_figure, **settings)
+            if summary["figure"]:
+                _log(f"drew {summary['figure']}")
             if as_json:
                 return typer.echo(json.dumps(summary, indent=2))
             for key, value in summary.items():

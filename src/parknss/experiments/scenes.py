@@ -40,10 +40,12 @@ def plan_one(
     closed_loop_overrides: dict | None = None,
     out: Path | None = None,
     overwrite: bool = False,
+    figure: bool = True,
 ) -> dict:
     """``parknss plan --scene``: plan a scene JSON file, grid cell 0-35 or ``robust:N``
-    (:func:`parknss.sim.planner.plan_named_scene`), draw ``plan_<scene>.png`` and, with
-    ``out``, write ``plan_<scene>.json``; the plan summary with the figure's path."""
+    (:func:`parknss.sim.planner.plan_named_scene`), draw ``plan_<scene>.png`` (unless not
+    ``figure``: matplotlib is then not even imported) and, with ``out``, write
+    ``plan_<scene>.json``; the plan summary with the figure's path (None without one)."""
     files = files or SimConfigFiles()
     scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
     name = safe_stem(scene.meta.name, what="scene name")  # before the work
@@ -51,7 +53,6 @@ def plan_one(
     identity = {"scene": _scene_arg(spec), "refine": refine,
                 "closed_loop_overrides": closed_loop_overrides, **config_paths(files)}
     with run_folder(folder, command="parknss plan", args=identity, overwrite=overwrite) as run:
-        from parknss.report.plan_figure import draw_plan
         from parknss.sim.planner import plan_named_scene
 
         scene, plan = plan_named_scene(spec, files, refine=refine,
@@ -60,9 +61,13 @@ def plan_one(
         summary = plan.to_json(scene)
         if scene.notes:
             summary["scene_notes"] = list(scene.notes)
-        png = run.file(f"plan_{name}.png")
-        summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse,
-                                          refined=plan.refinement, geom=geom))
+        summary["figure"] = None
+        if figure:
+            from parknss.report.plan_figure import draw_plan  # matplotlib: ~0.5 CPU s
+
+            png = run.file(f"plan_{name}.png")
+            summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse,
+                                              refined=plan.refinement, geom=geom))
         if Path(str(spec)).suffix.lower() in (".csv", ".xml"):  # an imported scene
             summary["scene_json"] = str(run.write_json(f"scene_{name}.json",
                                                        scene.to_json()))

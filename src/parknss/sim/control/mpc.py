@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
-from scipy.linalg import expm
 
 from parknss.config import StrictModel
 
@@ -48,6 +47,8 @@ class MpcConfig(StrictModel):
 
 def discretise(lag_m: float, ds: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation over ``ds``: (A (3,3), B (3,), E (3,))."""
+    from scipy.linalg import expm  # here: importing the closed loop (and its configs) for
+    # `parknss plan` needs no scipy.linalg (0.2-0.4 s)
     lam = max(float(lag_m), 1e-9)
     m = np.zeros((5, 5))
     m[0, 1] = 1.0
