@@ -29,6 +29,7 @@ from parknss.config import override
 from parknss.errors import ParknssError
 from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import ClosedLoopConfig, SimConfigFiles, load_closed_loop_config
+from parknss.sim.planning.frame import CanonicalFrame
 from parknss.sim.planning.hybrid_astar import HybridAStar, PlanningConfig, load_planning_config
 from parknss.sim.planning.refine import refine as refine_path
 from parknss.sim.scene_formats import load_scene
@@ -130,12 +131,25 @@ def plan_scene(
     if loop.plan_margin_m is not None:
         cfg = override(cfg, {"safety_margin_m": loop.plan_margin_m}, source="plan_margin_m")
     t0 = time.perf_counter()
+    # search and refinement in the scene's canonical frame (planning/frame.py): a moved
+    # scene gives the same plan moved with it; the trajectories come back in the world's
+    frame = CanonicalFrame.of(scene.start, scene.goal) if cfg.canonical_frame else None
+    scene = frame.to_canon_scene(scene) if frame is not None else scene
+    plan = _plan_in(scene, cfg, geom, refine, t0)
+    plan.vehicle = car.to_dict()
+    plan.steer_reserve = loop.steer_reserve
+    if frame is not None:
+        for name in ("trajectory", "coarse", "refinement"):
+            traj = getattr(plan, name)
+            if traj is not None:
+                setattr(plan, name, frame.to_world_trajectory(traj))
+    return plan
+
+
+def _plan_in(scene, cfg: PlanningConfig, geom: VehicleGeometry, refine: bool, t0: float):
+    """Search and refine ``scene`` as given (no frame change); :func:`plan_scene`."""
     res = HybridAStar(cfg, geom).plan(scene)
-    settings = {
-        "steer_reserve": loop.steer_reserve,
-        "margin_m": cfg.safety_margin_m,
-        "vehicle": car.to_dict(),
-    }
+    settings = {"margin_m": cfg.safety_margin_m}
     if not res.found:
         return Plan(
             None,
