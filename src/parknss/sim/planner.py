@@ -139,10 +139,13 @@ def plan_scene(
     plan.vehicle = car.to_dict()
     plan.steer_reserve = loop.steer_reserve
     if frame is not None:
+        moved: dict[int, Trajectory] = {}  # one world copy each (plan.trajectory is coarse)
         for name in ("trajectory", "coarse", "refinement"):
             traj = getattr(plan, name)
             if traj is not None:
-                setattr(plan, name, frame.to_world_trajectory(traj))
+                if id(traj) not in moved:
+                    moved[id(traj)] = frame.to_world_trajectory(traj)
+                setattr(plan, name, moved[id(traj)])
     return plan
 
 
