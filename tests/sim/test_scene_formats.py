@@ -109,7 +109,7 @@ def test_commonroad_static_obstacles_and_planning_problem():
     assert scene.start == pytest.approx((-8.0 - back, 3.0, 0.0))
     assert scene.goal[:2] == pytest.approx((0.0, -2.9 - back), abs=1e-6)
     assert scene.goal[2] == pytest.approx(math.pi / 2, abs=1e-3)
-    assert scene.meta.name == "commonroad-ZAM_Parking-1_1_T-1"
+    assert scene.meta.name == "commonroad-commonroad_parking-100"  # file and problem
     walls = read_commonroad(XML, geom, SceneImportConfig(commonroad_lanelet_walls=True))
     assert len(walls.obstacles) == 5 and walls.obstacles[-1].kind == "lanelet bound"
 

@@ -170,6 +170,13 @@ class SceneMeta:
     benchmark scenes are shifted so their numbers stay small (TPCAP lies near 4e9 m)."""
 
 
+VIEW_ZOOM_ABOVE_M = 100.0
+"""Maps larger than this (m, either side) are shown zoomed to the problem (start, goal,
+the plan) in figures and the web view."""
+VIEW_ZOOM_PAD_M = 10.0
+"""...with this border around them, m."""
+
+
 @dataclass(frozen=True)
 class Scene:
     """A parking problem: bounds (xmin, ymin, xmax, ymax) m, obstacles, start/goal poses."""

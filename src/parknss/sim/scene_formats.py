@@ -288,8 +288,9 @@ def read_commonroad(
     ocfg: ObstacleInputConfig | None = None,
     problem_id: str | None = None,
 ) -> Scene:
-    """The scene of a CommonRoad XML scenario (module docstring); named after its
-    ``benchmarkID`` (else the file stem). ``problem_id``: the ``planningProblem`` to plan
+    """The scene of a CommonRoad XML scenario (module docstring); named
+    ``commonroad-<file stem>-<planning problem id>`` (the file's ``benchmarkID`` may
+    disagree with its name). ``problem_id``: the ``planningProblem`` to plan
     (default the first; an unknown id is refused with the list of the file's ids)."""
     from lxml import etree
 
@@ -351,9 +352,9 @@ def read_commonroad(
     allp = np.concatenate(pts)
     m = cfg.commonroad_map_margin_m + geom.length
     lo, hi = allp.min(axis=0) - m, allp.max(axis=0) + m
-    name = root.get("benchmarkID") or p.stem
+    name = f"commonroad-{p.stem}-{problem.get('id')}"  # the file and the problem planned
     bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    return _build(f"commonroad-{name}", str(p), drawn, start, goal, bounds, cfg, ocfg)
+    return _build(name, str(p), drawn, start, goal, bounds, cfg, ocfg)
 
 
 def load_scene(

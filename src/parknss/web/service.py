@@ -156,6 +156,8 @@ class SimulatorService:
             accel_smoothing_s=self.cfg.accel_smoothing_s,
             plan_budget_s=self.cfg.plan_budget_s,
             simulate_budget_s=self.cfg.simulate_budget_s,
+            view_zoom_above_m=sc.VIEW_ZOOM_ABOVE_M,
+            view_zoom_pad_m=sc.VIEW_ZOOM_PAD_M,
         )
 
     def grid_scene(self, grid: str, index: int) -> sc.Scene:

@@ -264,6 +264,10 @@ def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init, planes):
             "tol": float(cfg.tol),
             "acceptable_tol": float(cfg.tol) * 100,
             "mu_strategy": cfg.mu_strategy,
+            "linear_solver": cfg.linear_solver,
+            "hessian_approximation": cfg.hessian_approximation,
+            "warm_start_init_point": "yes" if cfg.warm_start_init_point else "no",
+            "mu_init": float(cfg.mu_init),
         },
     )
     return opti, X, U, h
