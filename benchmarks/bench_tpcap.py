@@ -72,6 +72,7 @@ def run_case(path: Path, geom: VehicleGeometry, setting: dict, plants: list[str]
     plan = plan_scene(scene, loop, planning, geom)
     row = plan.to_json(scene)
     row.pop("trajectory")
+    row["length_full_m"] = None if plan.trajectory is None else plan.trajectory.length
     row["case"] = int(path.stem.lower().removeprefix("case"))
     row["runs"] = {}
     if plan.trajectory is not None and plants:

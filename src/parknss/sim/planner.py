@@ -134,7 +134,7 @@ def plan_scene(
     # search and refinement in the scene's canonical frame (planning/frame.py): a moved
     # scene gives the same plan moved with it; the trajectories come back in the world's
     frame = CanonicalFrame.of(scene.start, scene.goal) if cfg.canonical_frame else None
-    scene = frame.to_canon_scene(scene) if frame is not None else scene
+    scene = frame.to_canon_scene(scene, cfg.canonical_snap) if frame is not None else scene
     plan = _plan_in(scene, cfg, geom, refine, t0)
     plan.vehicle = car.to_dict()
     plan.steer_reserve = loop.steer_reserve

@@ -67,10 +67,15 @@ class CanonicalFrame:
         q = self.to_canon_xy(poly)
         return q[::-1].copy() if self.sign < 0 else q
 
-    def to_canon_scene(self, scene: Scene) -> Scene:
+    def to_canon_scene(self, scene: Scene, snap: float = 0.0) -> Scene:
         """``scene`` moved into this frame, a :class:`Scene` like any other: obstacles,
         start, goal and the map (its outline, or its box's corners; an outline that comes
-        out axis-aligned, as a goal-aligned TPCAP map does, becomes the box ``bounds``)."""
+        out axis-aligned, as a goal-aligned TPCAP map does, becomes the box ``bounds``).
+
+        ``snap`` > 0: every coordinate (m) and heading (rad) rounded to a multiple of it,
+        so that the same scene moved elsewhere (whose transform differs in the last bits,
+        ~1e-13 m) gives a bit-identical canonical scene, and the refinement's solver,
+        sensitive to such bits on its flat optimum, the same answer."""
         if scene.map_outline is not None:
             corners = np.asarray(scene.map_outline, dtype=float)
         else:
@@ -90,7 +95,7 @@ class CanonicalFrame:
             )
             for o in scene.obstacles
         )
-        return replace(
+        out = replace(
             scene,
             bounds=bounds,
             obstacles=obstacles,
@@ -98,6 +103,7 @@ class CanonicalFrame:
             goal=self.to_canon_pose(scene.goal),
             map_outline=None if aligned else tuple((float(a), float(b)) for a, b in q),
         )
+        return _snapped(out, snap) if snap > 0 else out
 
     def to_world_poses(self, poses: np.ndarray) -> np.ndarray:
         """(N, 3+) canonical poses -> world (extra columns kept)."""
@@ -186,6 +192,30 @@ class CanonicalScene:
         wx, wy = self.frame.to_world_xy(x, y)
         xmin, ymin, xmax, ymax = self.world_bounds
         return np.minimum(np.minimum(wx - xmin, xmax - wx), np.minimum(wy - ymin, ymax - wy))
+
+
+def _snapped(scene: Scene, snap: float) -> Scene:
+    """``scene`` with every number rounded to a multiple of ``snap`` (m, rad)."""
+
+    def r(v):
+        return np.round(np.asarray(v, dtype=float) / snap) * snap
+
+    def t(v):
+        return tuple(float(x) for x in r(v))
+
+    return replace(
+        scene,
+        bounds=t(scene.bounds),
+        obstacles=tuple(
+            Obstacle(o.kind, r(o.vertices), tuple(r(p) for p in o.parts))
+            for o in scene.obstacles
+        ),
+        start=t(scene.start),
+        goal=t(scene.goal),
+        map_outline=None
+        if scene.map_outline is None
+        else tuple(t(p) for p in scene.map_outline),
+    )
 
 
 def move_scene(scene: Scene, angle: float, shift, mirror: bool = False) -> Scene:

@@ -124,6 +124,11 @@ class PlanningConfig(StrictModel):
     canonical_frame: bool = Field(
         True, description="search in the goal's frame (frame.py): plans move with the scene"
     )
+    canonical_snap: float = Field(
+        1e-6, ge=0.0,
+        description="canonical coordinates (m) and headings (rad) rounded to this: a moved "
+        "scene gives bit-identical input (0: no rounding)",
+    )
     cell_offset: float = Field(
         0.5, ge=0.0, lt=1.0,
         description="cell and heading-bin anchor: the frame's origin sits this fraction "
