@@ -68,3 +68,17 @@ def test_tpcap_cases_moved_plan_the_same(case):
         assert got.trajectory.length == pytest.approx(ref.trajectory.length, abs=1e-6)
         assert got.trajectory.cusps == ref.trajectory.cusps
         assert got.expansions == ref.expansions
+
+
+@needs_tpcap
+def test_a_moved_tpcap_case_refines_the_same():
+    """The refinement runs in the canonical frame on snapped coordinates
+    (``canonical_snap``): the moved case's refined path has the same length to 1e-6 m."""
+    geom = load_vehicle_geometry(CONFIG_DIR / "tpcap_vehicle.yaml")
+    loop = override(load_closed_loop_config(), {"plan_margin_m": 0.10}, source="test")
+    scene = read_tpcap(TPCAP / "Case5.csv")
+    ref = plan_scene(scene, loop, None, geom)
+    got = plan_scene(move_scene(scene, *MOVE), loop, None, geom)
+    assert ref.refined and got.refined
+    assert got.trajectory.length == pytest.approx(ref.trajectory.length, abs=1e-6)
+    assert got.trajectory.cusps == ref.trajectory.cusps
