@@ -243,7 +243,7 @@ class SimulatorService:
         pose = np.asarray([scene.start], dtype=float)
         x, y, th = scene.start
         where = f"start pose ({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f}°)"
-        if not geometry.inside_bounds(pose, self.geom, scene.bounds)[0]:
+        if not geometry.inside_map(pose, self.geom, scene)[0]:
             raise BadSceneError(f"{where}: the car leaves the map {list(scene.bounds)}")
         for i, ob in enumerate(scene.obstacles):
             if np.any(geometry.collides(pose, self.geom, list(ob.convex_parts()))):

@@ -126,8 +126,8 @@ class PlanningConfig(StrictModel):
     )
     canonical_snap: float = Field(
         1e-6, ge=0.0,
-        description="canonical coordinates (m) and headings (rad) rounded to this: a moved "
-        "scene gives bit-identical input (0: no rounding)",
+        description="the refinement's canonical input (scene, coarse path) rounded to this, "
+        "m and rad: a moved scene refines the same (0: no rounding)",
     )
     cell_offset: float = Field(
         0.5, ge=0.0, lt=1.0,
