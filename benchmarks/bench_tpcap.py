@@ -2,6 +2,7 @@
 
     python benchmarks/bench_tpcap.py [--vehicle configs/tpcap_vehicle.yaml] [--cases 1-20]
         [--plants kinematic] [--expansions N] [--budget S] [--out FILE.json] [--json]
+        [--settings "margin 0.10"] [--moved]
 
 Reads the cases in place from ../shared/planning/tpcap (never copied into the
 repository; ``--tpcap`` elsewhere) with :func:`parknss.sim.scene_formats.read_tpcap`
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import sys
 from pathlib import Path
@@ -33,6 +35,7 @@ from pathlib import Path
 from parknss.config import CONFIG_DIR, override
 from parknss.sim.closed_loop import load_closed_loop_config
 from parknss.sim.planner import plan_scene
+from parknss.sim.planning.frame import move_scene
 from parknss.sim.planning.hybrid_astar import PlanningConfig, load_planning_config
 from parknss.sim.scene_formats import read_tpcap
 from parknss.sim.session import run_cell
@@ -54,14 +57,22 @@ def _cases(spec: str) -> list[int]:
     return out
 
 
+MOVE = (math.radians(37.0), (123.4, -56.7), True)
+"""``--moved``: mirror in y, rotate by 37 degrees, shift by (+123.4, -56.7) m."""
+
+
 def run_case(path: Path, geom: VehicleGeometry, setting: dict, plants: list[str],
-             planning: PlanningConfig):
+             planning: PlanningConfig, moved: bool = False):
     """One case under one setting: the plan summary and each plant's outcome."""
     scene = read_tpcap(path)
+    if moved:
+        angle, shift, mirror = MOVE
+        scene = move_scene(scene, angle, shift, mirror)
     loop = override(load_closed_loop_config(), setting, source="bench setting")
     plan = plan_scene(scene, loop, planning, geom)
     row = plan.to_json(scene)
     row.pop("trajectory")
+    row["length_full_m"] = None if plan.trajectory is None else plan.trajectory.length
     row["case"] = int(path.stem.lower().removeprefix("case"))
     row["runs"] = {}
     if plan.trajectory is not None and plants:
@@ -152,6 +163,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=float, default=None)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--moved", action="store_true",
+                    help="move every case rigidly first (mirror in y, rotate 37 deg, shift "
+                    "(+123.4, -56.7) m): the table must not change")
     a = ap.parse_args(argv)
     if not a.tpcap.is_dir():
         print(f"{a.tpcap}: TPCAP cases not found", file=sys.stderr)
@@ -165,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in a.settings.split(","):
         rows = []
         for c in _cases(a.cases):
-            rows.append(run_case(a.tpcap / f"Case{c}.csv", geom, SETTINGS[name], plants, planning))
+            rows.append(run_case(a.tpcap / f"Case{c}.csv", geom, SETTINGS[name], plants, planning,
+                                 a.moved))
             print(f"[{name}] case {c}: {rows[-1]['reason']}", file=sys.stderr, flush=True)
         doc["settings"][name] = {"rows": rows, "summary": summarize(rows, plants)}
         if not a.json:

@@ -198,3 +198,26 @@ def test_grid_cells_and_scene_names(tmp_path):
     assert sc.resolve_scene(str(path)).to_json() == sc.grid_scene(3).to_json()
     with pytest.raises(PlanningError, match="not a scene file"):
         sc.resolve_scene("cell seven")
+
+
+def test_a_map_outline_round_trips_and_bad_ones_are_refused():
+    from parknss.sim.geometry import inside_map
+    from parknss.sim.planning.frame import move_scene
+
+    scene = move_scene(sc.grid_scene(3), 0.6, (50.0, -20.0))  # the map: a rotated box
+    back = sc.Scene.from_json(scene.to_json())
+    assert back.map_outline == scene.map_outline and back.bounds == scene.bounds
+    A, b = back.map_planes()
+    for p in scene.map_outline:  # the corners lie on the edges
+        assert np.max(A @ np.asarray(p) - b) == pytest.approx(0.0, abs=1e-9)
+    # the bounding box's corner is outside the rotated map
+    corner = (scene.bounds[0] + 0.5, scene.bounds[1] + 0.5, 0.0)
+    assert not inside_map([corner], VehicleGeometry(), back)[0]
+    assert inside_map([scene.goal], VehicleGeometry(), back)[0]
+    doc = scene.to_json()
+    doc["map_outline"] = doc["map_outline"][::-1]  # clockwise
+    with pytest.raises(PlanningError, match="convex and counter-clockwise"):
+        sc.Scene.from_json(doc)
+    doc["map_outline"] = [[0.0, 0.0], [1.0, float("nan")], [0.0, 1.0]]
+    with pytest.raises(PlanningError, match="finite"):
+        sc.Scene.from_json(doc)

@@ -29,9 +29,13 @@ def test_all_twenty_tpcap_cases_load():
         assert scene.meta.name == f"tpcap-case{i}"
         for ob in scene.obstacles:
             assert all(len(p) >= 3 for p in ob.convex_parts())
-        # the map is the start/goal box widened by 8 m (the source's convention)
-        x0 = min(raw[0], raw[3]) - 8.0 - (scene.meta.origin_m or (0, 0))[0]
-        assert scene.bounds[0] == pytest.approx(x0)
+        # the map is the start/goal box widened by 8 m (the source's convention), drawn in
+        # the goal's frame: each side 8 m beyond the nearer of start and goal
+        A, b = scene.map_planes()
+        poses = np.array([scene.start[:2], scene.goal[:2]])
+        np.testing.assert_allclose((b[None, :] - poses @ A.T).min(axis=0), 8.0, atol=1e-9)
+        corners = np.asarray(scene.map_outline)
+        assert scene.bounds == pytest.approx((*corners.min(axis=0), *corners.max(axis=0)))
 
 
 @needs_tpcap
@@ -105,7 +109,7 @@ def test_commonroad_static_obstacles_and_planning_problem():
     assert scene.start == pytest.approx((-8.0 - back, 3.0, 0.0))
     assert scene.goal[:2] == pytest.approx((0.0, -2.9 - back), abs=1e-6)
     assert scene.goal[2] == pytest.approx(math.pi / 2, abs=1e-3)
-    assert scene.meta.name == "commonroad-ZAM_Parking-1_1_T-1"
+    assert scene.meta.name == "commonroad-commonroad_parking-100"  # file and problem
     walls = read_commonroad(XML, geom, SceneImportConfig(commonroad_lanelet_walls=True))
     assert len(walls.obstacles) == 5 and walls.obstacles[-1].kind == "lanelet bound"
 

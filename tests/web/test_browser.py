@@ -346,3 +346,30 @@ def test_a_plan_shows_its_progress_and_can_be_cancelled(page):
     _settled(page)
     assert "planned" in page.inner_text("#plan-info")
     assert not [e for e in page.console_errors if "page error" in e]
+
+
+def test_a_large_map_is_shown_zoomed_to_the_problem(page, tmp_path):
+    """A 1 km map (a whole car park, as CommonRoad scenarios come) with the problem in one
+    corner: the view fits start and goal (plus a car length and the pad), not the map."""
+    from dataclasses import replace
+
+    from parknss.sim.scenarios import VIEW_ZOOM_ABOVE_M, grid_scene
+
+    _settled(page)
+    small = grid_scene(int(CELL))
+    xmin, ymin = small.bounds[:2]
+    big = replace(small, bounds=(xmin, ymin, xmin + 1000.0, ymin + 1000.0))
+    scene_file = tmp_path / "big_map.json"
+    big.save(scene_file)
+    _imported(page, scene_file)
+    box = page.evaluate("viewBox()")
+    assert box[0] == xmin and box[1] == ymin  # clipped to the map at the corner
+    assert max(box[2] - box[0], box[3] - box[1]) < VIEW_ZOOM_ABOVE_M
+    sx_, gx_ = small.start[0], small.goal[0]
+    assert box[0] <= min(sx_, gx_) and box[2] >= max(sx_, gx_)
+    # a map below the threshold is shown whole
+    scene_file = tmp_path / "small_map.json"
+    small.save(scene_file)
+    _imported(page, scene_file)
+    assert page.evaluate("viewBox()") == list(small.bounds)
+    assert not [e for e in page.console_errors if "page error" in e]

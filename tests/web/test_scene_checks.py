@@ -43,6 +43,11 @@ HOSTILE = [
     ("bounds 1e6", _scene(bounds=[-1e6, -1e6, 1e6, 1e6]), "scene.bounds[0]: -1e+06 m"),
     ("bounds 1e308", _scene(bounds=[-1e308, -1e308, 1e308, 1e308]), "±1000 m"),
     ("goal far", _scene(goal=[5000.0, 0.0, 0.0]), "scene.goal[0]"),
+    (
+        "map outline far",
+        _scene(map_outline=[[0.0, 0.0], [1e6, 0.0], [0.0, 10.0]]),
+        "scene.map_outline[1][0]: 1e+06 m",
+    ),
     ("heading 1e308", _scene(start=[0.0, 0.0, 1e308]), "scene.start[2]: 1e+308 rad"),
 ]
 

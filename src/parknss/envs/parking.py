@@ -213,7 +213,7 @@ class ParkingEnv(gym.Env):
         sign = 1 if self.y.vx >= 0 else -1
         self.trail.extend((float(x), float(y), sign) for x, y in p[:, :2])
         hit = bool(np.any(geometry.collides(p, self.geom, self.obstacles, circles=self.circles)))
-        out = not bool(np.all(geometry.inside_bounds(p, self.geom, self.scene.bounds)))
+        out = not bool(np.all(geometry.inside_map(p, self.geom, self.scene)))
         obs = self._obs()
         reward = float(self.compute_reward(obs["achieved_goal"], obs["desired_goal"], {}))
         success = reward > -self.cfg.success_goal_reward

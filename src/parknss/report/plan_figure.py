@@ -9,6 +9,7 @@ import numpy as np
 
 from parknss.report.style import figure, save
 from parknss.sim.geometry import footprint
+from parknss.sim.scenarios import VIEW_ZOOM_ABOVE_M, VIEW_ZOOM_PAD_M
 from parknss.sim.trajectory import Trajectory
 from parknss.vehicle import VehicleGeometry
 
@@ -21,10 +22,10 @@ def outline(ax, poly: np.ndarray, **kw) -> None:
     ax.plot(closed[:, 0], closed[:, 1], **kw)
 
 
-ZOOM_ABOVE_M = 100.0
+ZOOM_ABOVE_M = VIEW_ZOOM_ABOVE_M
 """Maps larger than this (m, either side) are drawn zoomed to the plan, start and goal."""
-ZOOM_PAD_M = 10.0
-"""...with this border around them, m."""
+ZOOM_PAD_M = VIEW_ZOOM_PAD_M
+"""...with this border around them, m (the web view zooms the same way)."""
 
 
 def scene_axes(scene, frame: bool = False):

@@ -287,6 +287,21 @@ def inside_bounds(poses, geom: VehicleGeometry, bounds) -> np.ndarray:
     return np.all((x >= xmin) & (x <= xmax) & (y >= ymin) & (y <= ymax), axis=1)
 
 
+def inside_planes(poses, geom: VehicleGeometry, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) True where the whole footprint satisfies A @ p <= b (a convex map), m."""
+    fp = footprints(poses, geom)
+    return np.all(np.einsum("nkj,mj->nkm", fp[..., :2], A) <= b, axis=(1, 2))
+
+
+def inside_map(poses, geom: VehicleGeometry, scene) -> np.ndarray:
+    """(N,) True where the whole footprint lies on the scene's map (its box ``bounds``,
+    and its ``map_outline`` when it has one)."""
+    ok = inside_bounds(poses, geom, scene.bounds)
+    if getattr(scene, "map_outline", None) is not None:
+        ok &= inside_planes(poses, geom, *scene.map_planes())
+    return ok
+
+
 # ---------------------------------------------------------------------------------------
 # Dense checking along a path
 

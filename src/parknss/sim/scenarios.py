@@ -170,6 +170,13 @@ class SceneMeta:
     benchmark scenes are shifted so their numbers stay small (TPCAP lies near 4e9 m)."""
 
 
+VIEW_ZOOM_ABOVE_M = 100.0
+"""Maps larger than this (m, either side) are shown zoomed to the problem (start, goal,
+the plan) in figures and the web view."""
+VIEW_ZOOM_PAD_M = 10.0
+"""...with this border around them, m."""
+
+
 @dataclass(frozen=True)
 class Scene:
     """A parking problem: bounds (xmin, ymin, xmax, ymax) m, obstacles, start/goal poses."""
@@ -181,6 +188,15 @@ class Scene:
     meta: SceneMeta = field(default_factory=SceneMeta)
     notes: tuple[str, ...] = field(default=(), compare=False)
     """What loading normalised (removed vertices, lines made walls): reported, not saved."""
+    map_outline: tuple[tuple[float, float], ...] | None = None
+    """The map as a convex CCW polygon (x, y m) when it is not the box ``bounds`` (which is
+    then its bounding box): e.g. a TPCAP map aligned with the goal, so that it moves with
+    the scene. The planner, the refinement and the dense check keep the car inside it."""
+
+    def map_planes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A (M, 2), b (M,)): a point p is on the map where A @ p <= b (the outline's
+        edges, else the box's four sides)."""
+        return map_planes(self.bounds, self.map_outline)
 
     def obstacle_arrays(self) -> list[np.ndarray]:
         """The convex parts of every obstacle as a list of (M, 2) CCW arrays, m: what the
@@ -201,7 +217,10 @@ class Scene:
             "start": [float(v) for v in self.start],
             "goal": [float(v) for v in self.goal],
             "meta": dict(self.meta.__dict__),
-        }
+        } | (
+            {} if self.map_outline is None
+            else {"map_outline": [list(map(float, p)) for p in self.map_outline]}
+        )
 
     @classmethod
     def from_json(
@@ -308,7 +327,40 @@ def _scene_from_json(data, source: str, cfg: ObstacleInputConfig | None = None) 
         meta = SceneMeta(**meta_in)
     except TypeError as exc:
         raise PlanningError(f"{source}: bad meta ({exc})") from exc
-    return Scene(bounds, tuple(obstacles), start, goal, meta, tuple(notes))
+    outline = None
+    if data.get("map_outline") is not None:
+        outline = _outline(data["map_outline"], source)
+        lo, hi = np.min(outline, axis=0), np.max(outline, axis=0)
+        bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    return Scene(bounds, tuple(obstacles), start, goal, meta, tuple(notes), outline)
+
+
+def _outline(raw, source: str) -> tuple[tuple[float, float], ...]:
+    """A map outline from JSON: a convex counter-clockwise polygon of finite points."""
+    try:
+        pts = np.asarray(raw, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise PlanningError(f"{source}: map_outline must be a list of [x, y] points") from exc
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not np.all(np.isfinite(pts)):
+        raise PlanningError(f"{source}: map_outline must be 3 or more finite [x, y] points")
+    d = np.roll(pts, -1, axis=0) - pts
+    cross = d[:, 0] * np.roll(d[:, 1], -1) - d[:, 1] * np.roll(d[:, 0], -1)
+    if np.any(cross <= 0.0):
+        raise PlanningError(f"{source}: map_outline must be convex and counter-clockwise")
+    return tuple((float(x), float(y)) for x, y in pts)
+
+
+def map_planes(bounds, outline=None) -> tuple[np.ndarray, np.ndarray]:
+    """Half-planes (A (M, 2), b (M,)) of a map: A @ p <= b on it. ``outline``: a convex
+    CCW polygon (its edges' outward normals, unit length); None: the box ``bounds``."""
+    if outline is None:
+        xmin, ymin, xmax, ymax = (float(v) for v in bounds)
+        A = np.array([[-1.0, 0.0], [0.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+        return A, np.array([-xmin, -ymin, xmax, ymax])
+    p = np.asarray(outline, dtype=float)
+    d = np.roll(p, -1, axis=0) - p
+    n = np.column_stack([d[:, 1], -d[:, 0]]) / np.hypot(d[:, 0], d[:, 1])[:, None]
+    return n, np.einsum("ij,ij->i", n, p)
 
 
 # ---------------------------------------------------------------------------------------

@@ -5,8 +5,9 @@
 axle, m, rad), the number of obstacles N, the vertex count of each, then every obstacle's
 vertices as x, y pairs (m). Obstacles are polygons as drawn (non-convex ones and walls
 drawn as lines included; :mod:`parknss.sim.obstacles`). The map is, as in the source's
-plotting convention, the bounding box of start and goal widened by ``tpcap_map_margin_m``
-(8 m) on every side.
+plotting convention, the box of start and goal widened by ``tpcap_map_margin_m`` (8 m) on
+every side, drawn in the goal's frame (:func:`tpcap_map`: the scene's ``map_outline``, its
+bounding box the scene's ``bounds``) so that a moved case keeps its map.
 
 **CommonRoad** (XML, 2020a layout; read with lxml, not commonroad-io): every
 ``staticObstacle`` (shapes ``rectangle``, ``circle``, ``polygon`` in its own frame, moved
@@ -64,9 +65,11 @@ def _build(
     bounds: tuple[float, float, float, float],
     cfg: SceneImportConfig,
     ocfg: ObstacleInputConfig,
+    outline: np.ndarray | None = None,
 ) -> Scene:
-    """A scene from drawn obstacles (kind, (M, 2) vertices m, shape), poses and bounds, all in
-    the source's coordinates; shifted to a local frame when far from the origin."""
+    """A scene from drawn obstacles (kind, (M, 2) vertices m, shape), poses and bounds (or
+    a map ``outline``, (M, 2) CCW, whose bounding box ``bounds`` is), all in the source's
+    coordinates; shifted to a local frame when far from the origin."""
     origin = _shift([start[None, :2], goal[None, :2], *[v for _, v, _ in drawn]], cfg)
     check_counts(len(drawn), sum(len(v) for _, v, _ in drawn), source, ocfg)
     obstacles: list[Obstacle] = []
@@ -83,7 +86,9 @@ def _build(
     pose = lambda p: (float(p[0] - ox), float(p[1] - oy), float(p[2]))  # noqa: E731
     shifted = bool(np.any(origin))
     meta = SceneMeta(name=name, source=source, origin_m=(float(ox), float(oy)) if shifted else None)
-    return Scene(b, tuple(obstacles), pose(start), pose(goal), meta, tuple(notes))
+    if outline is not None:
+        outline = tuple((float(x - ox), float(y - oy)) for x, y in outline)
+    return Scene(b, tuple(obstacles), pose(start), pose(goal), meta, tuple(notes), outline)
 
 
 # ---------------------------------------------------------------------------------------
@@ -120,10 +125,27 @@ def read_tpcap(
     ends = np.concatenate([[0], np.cumsum(counts.astype(int))])
     drawn = [("obstacle", xy[ends[i] : ends[i + 1]], "polygon") for i in range(n)]
     start, goal = v[0:3], v[3:6]
-    m = cfg.tpcap_map_margin_m
-    lo, hi = np.minimum(start[:2], goal[:2]) - m, np.maximum(start[:2], goal[:2]) + m
+    outline = tpcap_map(start, goal, cfg.tpcap_map_margin_m)
+    lo, hi = outline.min(axis=0), outline.max(axis=0)
     bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    return _build(f"tpcap-{p.stem.lower()}", str(p), drawn, start, goal, bounds, cfg, ocfg)
+    name = f"tpcap-{p.stem.lower()}"
+    return _build(name, str(p), drawn, start, goal, bounds, cfg, ocfg, outline)
+
+
+def tpcap_map(start, goal, margin: float) -> np.ndarray:
+    """The TPCAP map (4, 2) CCW, m: the box of start and goal widened by ``margin`` on
+    every side, drawn in the goal's frame (axes along and across the goal heading), so
+    that it moves with the scene (a rotated case keeps its map)."""
+    gx, gy, gth = (float(t) for t in goal[:3])
+    c, s = math.cos(gth), math.sin(gth)
+    dx, dy = float(start[0]) - gx, float(start[1]) - gy
+    sx, sy = c * dx + s * dy, -s * dx + c * dy  # the start in the goal's frame
+    x0, x1 = min(0.0, sx) - margin, max(0.0, sx) + margin
+    y0, y1 = min(0.0, sy) - margin, max(0.0, sy) + margin
+    local = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    return np.column_stack(
+        [gx + c * local[:, 0] - s * local[:, 1], gy + s * local[:, 0] + c * local[:, 1]]
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -266,8 +288,9 @@ def read_commonroad(
     ocfg: ObstacleInputConfig | None = None,
     problem_id: str | None = None,
 ) -> Scene:
-    """The scene of a CommonRoad XML scenario (module docstring); named after its
-    ``benchmarkID`` (else the file stem). ``problem_id``: the ``planningProblem`` to plan
+    """The scene of a CommonRoad XML scenario (module docstring); named
+    ``commonroad-<file stem>-<planning problem id>`` (the file's ``benchmarkID`` may
+    disagree with its name). ``problem_id``: the ``planningProblem`` to plan
     (default the first; an unknown id is refused with the list of the file's ids)."""
     from lxml import etree
 
@@ -329,9 +352,9 @@ def read_commonroad(
     allp = np.concatenate(pts)
     m = cfg.commonroad_map_margin_m + geom.length
     lo, hi = allp.min(axis=0) - m, allp.max(axis=0) + m
-    name = root.get("benchmarkID") or p.stem
+    name = f"commonroad-{p.stem}-{problem.get('id')}"  # the file and the problem planned
     bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    return _build(f"commonroad-{name}", str(p), drawn, start, goal, bounds, cfg, ocfg)
+    return _build(name, str(p), drawn, start, goal, bounds, cfg, ocfg)
 
 
 def load_scene(

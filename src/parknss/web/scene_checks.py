@@ -46,8 +46,8 @@ def check_pose(pose, where: str, max_coordinate_m: float, max_heading_rad: float
 
 
 def check_scene_json(doc, max_coordinate_m: float, max_heading_rad: float) -> None:
-    """BadSceneError for the first out-of-range number (bounds, vertices, start, goal) or
-    mistyped meta field of a posted scene; what is not a number is left to
+    """BadSceneError for the first out-of-range number (bounds, map outline, vertices,
+    start, goal) or mistyped meta field of a posted scene; what is not a number is left to
     :meth:`parknss.sim.scenarios.Scene.from_json`."""
     if not isinstance(doc, dict):
         return
@@ -55,6 +55,12 @@ def check_scene_json(doc, max_coordinate_m: float, max_heading_rad: float) -> No
     if isinstance(bounds, list | tuple):
         for i, v in enumerate(bounds[:4]):
             _check(v, max_coordinate_m, f"scene.bounds[{i}]", "m")
+    outline = doc.get("map_outline")
+    if isinstance(outline, list):
+        for j, point in enumerate(outline):
+            if isinstance(point, list | tuple):
+                for k, v in enumerate(point[:2]):
+                    _check(v, max_coordinate_m, f"scene.map_outline[{j}][{k}]", "m")
     for key in ("start", "goal"):
         check_pose(doc.get(key), f"scene.{key}", max_coordinate_m, max_heading_rad)
     obstacles = doc.get("obstacles")

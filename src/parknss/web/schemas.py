@@ -93,6 +93,10 @@ class Health(BaseModel):
     accel_smoothing_s: float = Field(description="window of the page's smoothed ax/ay, s")
     plan_budget_s: float = Field(description="wall-clock budget of a plan request, s")
     simulate_budget_s: float = Field(description="wall-clock budget of a simulate request, s")
+    view_zoom_above_m: float = Field(
+        description="maps larger than this (m) are shown zoomed to start and goal"
+    )
+    view_zoom_pad_m: float = Field(description="...with this border, m")
 
 
 class CellInfo(BaseModel):

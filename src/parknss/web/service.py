@@ -156,6 +156,8 @@ class SimulatorService:
             accel_smoothing_s=self.cfg.accel_smoothing_s,
             plan_budget_s=self.cfg.plan_budget_s,
             simulate_budget_s=self.cfg.simulate_budget_s,
+            view_zoom_above_m=sc.VIEW_ZOOM_ABOVE_M,
+            view_zoom_pad_m=sc.VIEW_ZOOM_PAD_M,
         )
 
     def grid_scene(self, grid: str, index: int) -> sc.Scene:
@@ -241,7 +243,7 @@ class SimulatorService:
         pose = np.asarray([scene.start], dtype=float)
         x, y, th = scene.start
         where = f"start pose ({x:.2f} m, {y:.2f} m, {math.degrees(th):.1f}°)"
-        if not geometry.inside_bounds(pose, self.geom, scene.bounds)[0]:
+        if not geometry.inside_map(pose, self.geom, scene)[0]:
             raise BadSceneError(f"{where}: the car leaves the map {list(scene.bounds)}")
         for i, ob in enumerate(scene.obstacles):
             if np.any(geometry.collides(pose, self.geom, list(ob.convex_parts()))):

@@ -16,7 +16,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from parknss.sim.scenarios import Obstacle, Scene, map_planes
 from parknss.sim.trajectory import Trajectory
+
+AXIS_ALIGNED_RTOL = 1e-9
+"""A moved map outline whose corners lie this close (relative to its size) to its
+bounding box is that box."""
 
 
 @dataclass(frozen=True)
@@ -62,6 +67,39 @@ class CanonicalFrame:
         q = self.to_canon_xy(poly)
         return q[::-1].copy() if self.sign < 0 else q
 
+    def to_canon_scene(self, scene: Scene) -> Scene:
+        """``scene`` moved into this frame, a :class:`Scene` like any other: obstacles,
+        start, goal and the map (its outline, or its box's corners; an outline that comes
+        out axis-aligned, as a goal-aligned TPCAP map does, becomes the box ``bounds``)."""
+        if scene.map_outline is not None:
+            corners = np.asarray(scene.map_outline, dtype=float)
+        else:
+            xmin, ymin, xmax, ymax = (float(v) for v in scene.bounds)
+            corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+        q = self.to_canon_polygon(corners)
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        bounds = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        span = float(np.max(hi - lo))
+        on_box = np.minimum(np.abs(q - lo), np.abs(q - hi)).max(axis=1)
+        aligned = len(q) == 4 and bool(np.all(on_box <= AXIS_ALIGNED_RTOL * span))
+        obstacles = tuple(
+            Obstacle(
+                o.kind,
+                self.to_canon_polygon(o.vertices),
+                tuple(self.to_canon_polygon(p) for p in o.parts),
+            )
+            for o in scene.obstacles
+        )
+        out = replace(
+            scene,
+            bounds=bounds,
+            obstacles=obstacles,
+            start=self.to_canon_pose(scene.start),
+            goal=self.to_canon_pose(scene.goal),
+            map_outline=None if aligned else tuple((float(a), float(b)) for a, b in q),
+        )
+        return out
+
     def to_world_poses(self, poses: np.ndarray) -> np.ndarray:
         """(N, 3+) canonical poses -> world (extra columns kept)."""
         out = np.array(poses, dtype=float)
@@ -97,6 +135,7 @@ class CanonicalScene:
     obstacles: list[np.ndarray]
     start: tuple[float, float, float]
     goal: tuple[float, float, float]
+    planes: tuple[np.ndarray, np.ndarray] | None = None  # the map outline's, canonical
 
     @classmethod
     def of(cls, scene, canonical: bool = True) -> CanonicalScene:
@@ -108,8 +147,13 @@ class CanonicalScene:
             frame = CanonicalFrame(0.0, 0.0, 0.0, 1.0)
         xmin, ymin, xmax, ymax = (float(v) for v in scene.bounds)
         box = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
-        corners = frame.to_canon_xy(box)
+        if getattr(scene, "map_outline", None) is not None:
+            box = np.asarray(scene.map_outline, dtype=float)
+        corners = frame.to_canon_polygon(box)
         lo, hi = corners.min(axis=0), corners.max(axis=0)
+        planes = None
+        if getattr(scene, "map_outline", None) is not None:
+            planes = map_planes(None, corners)
         return cls(
             frame,
             (xmin, ymin, xmax, ymax),
@@ -117,6 +161,7 @@ class CanonicalScene:
             [frame.to_canon_polygon(o) for o in scene.obstacle_arrays()],
             frame.to_canon_pose(scene.start),
             frame.to_canon_pose(scene.goal),
+            planes,
         )
 
     def obstacle_arrays(self) -> list[np.ndarray]:
@@ -124,12 +169,100 @@ class CanonicalScene:
 
     def inside_map(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Boolean (same shape): canonical points inside the world map."""
+        if self.planes is not None:
+            return self.map_edge_distance(x, y) >= 0.0
         wx, wy = self.frame.to_world_xy(x, y)
         xmin, ymin, xmax, ymax = self.world_bounds
         return (wx >= xmin) & (wx <= xmax) & (wy >= ymin) & (wy <= ymax)
 
     def map_edge_distance(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Signed distance (m) of canonical points to the world map's edge (< 0 outside)."""
+        if self.planes is not None:
+            A, b = self.planes
+            x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+            out = b[0] - A[0, 0] * x - A[0, 1] * y
+            for k in range(1, len(b)):
+                out = np.minimum(out, b[k] - A[k, 0] * x - A[k, 1] * y)
+            return out
         wx, wy = self.frame.to_world_xy(x, y)
         xmin, ymin, xmax, ymax = self.world_bounds
         return np.minimum(np.minimum(wx - xmin, xmax - wx), np.minimum(wy - ymin, ymax - wy))
+
+
+def snap_scene(scene: Scene, snap: float) -> Scene:
+    """``scene`` with every coordinate (m) and heading (rad) rounded to a multiple of
+    ``snap``: the same scene moved elsewhere, whose canonical transform differs in the
+    last bits (~1e-13 m), becomes bit-identical (unless a number lies within those bits
+    of a rounding boundary, about 1e-7 of the time at 1e-6)."""
+
+    def r(v):
+        return np.round(np.asarray(v, dtype=float) / snap) * snap
+
+    def t(v):
+        return tuple(float(x) for x in r(v))
+
+    return replace(
+        scene,
+        bounds=t(scene.bounds),
+        obstacles=tuple(
+            Obstacle(o.kind, r(o.vertices), tuple(r(p) for p in o.parts))
+            for o in scene.obstacles
+        ),
+        start=t(scene.start),
+        goal=t(scene.goal),
+        map_outline=None
+        if scene.map_outline is None
+        else tuple(t(p) for p in scene.map_outline),
+    )
+
+
+def snap_trajectory(traj: Trajectory, snap: float) -> Trajectory:
+    """``traj`` with its poses' x, y (m), heading (rad) and steering-wheel angle (deg)
+    rounded to multiples of ``snap`` (see :func:`snap_scene`)."""
+    segs = []
+    for seg in traj.segments:
+        poses = np.array(seg.poses, dtype=float)
+        poses[:, :3] = np.round(poses[:, :3] / snap) * snap
+        steer = None if seg.steer is None else np.round(np.asarray(seg.steer) / snap) * snap
+        segs.append(replace(seg, poses=poses, steer=steer))
+    return Trajectory(segs, source=traj.source, info=dict(traj.info))
+
+
+def move_scene(scene: Scene, angle: float, shift, mirror: bool = False) -> Scene:
+    """``scene`` moved rigidly: mirrored in y (first, when ``mirror``), rotated by
+    ``angle`` rad about the origin, then shifted by ``shift`` (x, y m). The map moves
+    with it: its outline (or its box's corners) becomes the moved scene's outline."""
+    m = -1.0 if mirror else 1.0
+    c, s = math.cos(angle), math.sin(angle)
+
+    def xy(p):
+        p = np.asarray(p, dtype=float)
+        x, y = p[..., 0], m * p[..., 1]
+        return np.stack([c * x - s * y + shift[0], s * x + c * y + shift[1]], axis=-1)
+
+    def pose(p):
+        q = xy(p[:2])
+        return (float(q[0]), float(q[1]), angle + m * float(p[2]))
+
+    def poly(v):
+        q = xy(v)
+        return q[::-1].copy() if mirror else q
+
+    if scene.map_outline is not None:
+        corners = np.asarray(scene.map_outline, dtype=float)
+    else:
+        xmin, ymin, xmax, ymax = (float(v) for v in scene.bounds)
+        corners = np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]])
+    outline = poly(corners)
+    lo, hi = outline.min(axis=0), outline.max(axis=0)
+    return replace(
+        scene,
+        bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+        obstacles=tuple(
+            Obstacle(o.kind, poly(o.vertices), tuple(poly(p) for p in o.parts))
+            for o in scene.obstacles
+        ),
+        start=pose(scene.start),
+        goal=pose(scene.goal),
+        map_outline=tuple((float(a), float(b)) for a, b in outline),
+    )

@@ -122,7 +122,17 @@ class PlanningConfig(StrictModel):
         60.0, gt=0.0, description="wall-clock guard over setup and search, s"
     )
     canonical_frame: bool = Field(
-        False, description="search in the goal's frame (frame.py): plans move with the scene"
+        True, description="search in the goal's frame (frame.py): plans move with the scene"
+    )
+    canonical_snap: float = Field(
+        1e-6, ge=0.0,
+        description="the refinement's canonical input (scene, coarse path) rounded to this, "
+        "m and rad: a moved scene refines the same (0: no rounding)",
+    )
+    cell_offset: float = Field(
+        0.5, ge=0.0, lt=1.0,
+        description="cell and heading-bin anchor: the frame's origin sits this fraction "
+        "into a cell (0.5: at the centre of its cell and bin)",
     )
     region_margin_m: float = Field(
         20.0, gt=0.0, description="search region: start/goal box grown by this (doubles), m"
@@ -266,8 +276,9 @@ class HybridAStar:
         fine = clearance < c.fine_below_clearance_m
         res = c.fine_xy_resolution_m if fine else c.xy_resolution_m
         nth = self._nth_fine if fine else self._nth
-        a = (th % (2 * math.pi)) / (2 * math.pi) * nth
-        return (fine, math.floor(x / res), math.floor(y / res), math.floor(a) % nth)
+        o = c.cell_offset
+        a = (th % (2 * math.pi)) / (2 * math.pi) * nth + o
+        return (fine, math.floor(x / res + o), math.floor(y / res + o), math.floor(a) % nth)
 
     def _move_cost(
         self,
@@ -310,7 +321,7 @@ class HybridAStar:
     def _precheck(self, scene, obstacles) -> PlanResult | None:
         g, m = self.geom, self.cfg.safety_margin_m
         for name, pose in (("goal", scene.goal), ("start", scene.start)):
-            if not geometry.inside_bounds([pose], g, scene.bounds)[0]:
+            if not geometry.inside_map([pose], g, scene)[0]:
                 return PlanResult(False, f"{name} off the map", detail=f"{name} {pose}")
         for name, pose in (("goal", scene.goal), ("start", scene.start)):
             if obstacles:
@@ -701,7 +712,7 @@ def verify_trajectory(traj: Trajectory, scene, geom: VehicleGeometry, cfg: Plann
         np.asarray([scene.start], dtype=float)
     ]
     dense = np.concatenate(parts, axis=0)
-    if not np.all(geometry.inside_bounds(dense, geom, scene.bounds)):
+    if not np.all(geometry.inside_map(dense, geom, scene)):
         return False, -1.0
     if not obstacles:
         return True, math.inf

@@ -181,7 +181,14 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
     )
     n = len(ws.poses) - 1
     kappa_max = math.tan(lim.delta_max) / geom.wheelbase
+    # the knot bound: the margin plus its buffer, but never above the warm start's own
+    # clearance (at least the margin): a coarse path squeezed between margin and buffer
+    # (fine cells near obstacles) keeps a feasible start; the dense check and the repair
+    # rounds below still hold the margin between knots
     d_min = np.full(n + 1, lim.d_min)
+    if obstacles:
+        clr = geometry.clearance(ws.poses, geom, obstacles, cutoff=lim.d_min + 1.0)
+        d_min = np.minimum(d_min, np.maximum(margin, clr))
     detail: dict = {"intervals": n, "obstacles": len(terms), "iterations": 0, "repairs": 0}
     sol = None
     ends = (seg.poses[0], seg.poses[-1])
@@ -192,7 +199,8 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
             return None, detail
         if sol is not None:
             rewarm(terms, sol.poses, geom)
-        sol = solve_segment(ws, terms, scene.bounds, geom, lim, cfg, left, d_min, sol)
+        planes = scene.map_planes() if getattr(scene, "map_outline", None) else None
+        sol = solve_segment(ws, terms, scene.bounds, geom, lim, cfg, left, d_min, sol, planes)
         detail.update(iterations=detail["iterations"] + sol.iterations, status=sol.status)
         detail["duration_s"] = round(n * sol.h, 3)
         if not sol.success:

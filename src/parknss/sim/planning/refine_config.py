@@ -27,18 +27,18 @@ class RefineConfig(StrictModel):
         0.02, ge=0.0, description="added to the margin at the knots (covers between knots), m"
     )
     broadphase_m: float = Field(
-        1.5, ge=0.0, description="obstacles this far beyond the margin from the warm start enter, m"
+        0.8, ge=0.0, description="obstacles this far beyond the margin from the warm start enter, m"
     )
     broadphase_knots: int = Field(
-        6, ge=0, description="...counting the warm start this many knots either side"
+        3, ge=0, description="...counting the warm start this many knots either side"
     )
     repair_rounds: int = Field(
         3, ge=0, description="re-solves raising the knot margin where the dense check fails"
     )
     # discretisation
-    dt_target_s: float = Field(0.25, gt=0.0, description="warm-start time step, s")
+    dt_target_s: float = Field(1.0, gt=0.0, description="warm-start time step, s")
     min_intervals: int = Field(8, ge=2, description="fewest intervals per gear segment")
-    max_intervals: int = Field(120, ge=2, description="most intervals per gear segment")
+    max_intervals: int = Field(40, ge=2, description="most intervals per gear segment")
     dt_min_s: float = Field(0.02, gt=0.0, description="lower bound of the free time step, s")
     dt_max_s: float = Field(1.0, gt=0.0, description="upper bound of the free time step, s")
     min_segment_m: float = Field(
@@ -74,6 +74,16 @@ class RefineConfig(StrictModel):
     )
     tol: float = Field(1e-6, gt=0.0, description="IPOPT convergence tolerance")
     mu_strategy: Literal["adaptive", "monotone"] = Field("adaptive", description="IPOPT barrier")
+    linear_solver: Literal["mumps", "spral"] = Field(
+        "mumps", description="IPOPT's sparse linear solver (both ship with casadi's IPOPT)"
+    )
+    hessian_approximation: Literal["exact", "limited-memory"] = Field(
+        "exact", description="IPOPT Hessian: exact (CasADi) or L-BFGS"
+    )
+    warm_start_init_point: bool = Field(
+        False, description="IPOPT starts from the given primal and dual guess as is"
+    )
+    mu_init: float = Field(0.1, gt=0.0, description="IPOPT's initial barrier parameter")
     # output and fallback
     output_step_m: float = Field(0.05, gt=0.0, description="pose spacing of the result, m")
     fallback_speed_ms: float = Field(0.6, gt=0.0, description="coarse fallback cruise, m/s")

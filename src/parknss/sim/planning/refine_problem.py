@@ -117,15 +117,17 @@ def solve_segment(
     cpu_time_s: float,
     d_min: np.ndarray | None = None,
     init: SegmentSolution | None = None,
+    planes: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SegmentSolution:
     """Solve one segment's NLP; never raises for a solver failure.
 
     ``ws`` is the warm start and the deviation reference; ``d_min`` (N+1,) per-knot
     distance bounds, m (default ``lim.d_min``); ``init`` an earlier solution to start
-    from instead of ``ws`` (the terms' duals should then be re-warmed at its poses).
+    from instead of ``ws`` (the terms' duals should then be re-warmed at its poses);
+    ``planes`` (A (M, 2), b (M,)): a map outline the corners keep A @ p <= b inside too.
     """
     try:
-        opti, X, U, h = _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init)
+        opti, X, U, h = _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init, planes)
         sol = opti.solve_limited()
         val = sol.value
         stats = opti.stats()
@@ -147,7 +149,7 @@ def solve_segment(
     )
 
 
-def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init):
+def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init, planes):
     """The Opti problem of :func:`solve_segment`: (opti, X, U, h)."""
     n = len(ws.poses) - 1
     dmin = np.full(n + 1, lim.d_min) if d_min is None else np.asarray(d_min, dtype=float)
@@ -204,6 +206,8 @@ def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init):
                 cy = y[1:-1] + s * ex + c * ey
                 opti.subject_to(opti.bounded(xmin, cx, xmax))
                 opti.subject_to(opti.bounded(ymin, cy, ymax))
+                for (ax, ay), bk in zip(*planes, strict=True) if planes is not None else ():
+                    opti.subject_to(float(ax) * cx + float(ay) * cy <= float(bk))
 
     # H-OBCA collision avoidance per obstacle over its knots
     duals = []
@@ -260,6 +264,10 @@ def _build(ws, terms, bounds, geom, lim, cfg, cpu_time_s, d_min, init):
             "tol": float(cfg.tol),
             "acceptable_tol": float(cfg.tol) * 100,
             "mu_strategy": cfg.mu_strategy,
+            "linear_solver": cfg.linear_solver,
+            "hessian_approximation": cfg.hessian_approximation,
+            "warm_start_init_point": "yes" if cfg.warm_start_init_point else "no",
+            "mu_init": float(cfg.mu_init),
         },
     )
     return opti, X, U, h

@@ -512,10 +512,29 @@ function canvasSize(canvas, cssHeight) {
   return { ctx, w, h };
 }
 
+// The box shown: the map, or on a map larger than health.view_zoom_above_m (a CommonRoad
+// scenario of a whole car park) the problem's region: start and goal grown by a car length
+// and health.view_zoom_pad_m, within the map (the plan figures zoom the same way).
+function viewBox() {
+  const b = state.scene.bounds;
+  const hz = state.health || {};
+  const above = hz.view_zoom_above_m ?? Infinity;
+  if (Math.max(b[2] - b[0], b[3] - b[1]) <= above) return b;
+  const grow = (hz.view_zoom_pad_m ?? 10) + (hz.vehicle ? hz.vehicle.length_m : 5);
+  const xs = [state.scene.start[0], state.scene.goal[0]];
+  const ys = [state.scene.start[1], state.scene.goal[1]];
+  return [
+    Math.max(b[0], Math.min(...xs) - grow),
+    Math.max(b[1], Math.min(...ys) - grow),
+    Math.min(b[2], Math.max(...xs) + grow),
+    Math.min(b[3], Math.max(...ys) + grow),
+  ];
+}
+
 function fitView() {
   if (!state.scene) return;
   const canvas = $("view");
-  const [xmin, ymin, xmax, ymax] = state.scene.bounds;
+  const [xmin, ymin, xmax, ymax] = viewBox();
   const w = canvas.clientWidth || 800;
   const pad = 24;
   const k = (w - 2 * pad) / (xmax - xmin);
