@@ -9,7 +9,7 @@ chain's closed-loop error (``parknss fidelity --candidate nss|actuators``):
   free, bus quantisation not applied) read the NSS's speed and feed the chain's NSS
   vehicle u = [gear, torque N·m, pressure bar, steer deg]. Its error against the truth is
   the NSS's. The controller sees the NSS's outputs, as under the chain plant, and the
-  chain's brake-hold latch acts (``latch``, default True) as in the chain.
+  chain's brake latches act (``latch``, default True) as in the chain.
 * :class:`ChainActuatorsTruth` (candidate ``actuators``): the chain's input envelope, gear
   rule, actuator submodels and output envelope (exactly :class:`~parknss.chain.realtime.
   RealtimeChain`'s arithmetic, state features read from the truth's state) feed the
@@ -84,7 +84,9 @@ class TruthActuatorsNSS:
         vx, yaw, ax, ay = nss.readout(self.x, us)
         self.x = nss.advance(self.x, us)
         self.vx_now = nss.vx(self.x)
-        if self.latch and self.envelope.held(pressure, self.vx_now):
+        env = self.envelope
+        if self.latch and (env.held(pressure, self.vx_now)
+                           or env.stops(pressure, gear, self.vx_now)):
             self.x = nss.initial_state(np.zeros(2), u)
             self.vx_now = nss.vx(self.x)
         self.gear = int(gear)
