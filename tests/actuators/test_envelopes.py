@@ -118,3 +118,24 @@ def test_stress_study_reports_the_active_envelopes(deployed):
     assert "input_clamp:decel_cmd" in rows["decel_-5"].active
     assert "input_clamp:torque_cmd" in rows["torque_x3"].active
     assert any(a.startswith("nonfinite") for a in rows["nan"].active)
+
+
+def test_brake_stop_latch_is_off_by_default_and_round_trips():
+    """Off (inf): the artefact's envelope JSON has no key for it (artefacts written before
+    the option stay byte-identical); on: it round-trips; negative is refused."""
+    import dataclasses
+    import math
+
+    from parknss.actuators.envelopes import Envelope
+    from parknss.errors import CheckpointError
+
+    env = Envelope((0.0, -0.8, -400.0), (80.0, 0.0, 400.0), hold_latch_bar=8.0)
+    assert math.isinf(env.stop_latch_bar) and "stop_latch_bar" not in env.to_json()
+    assert not env.stops(1e9, -1, 0.1)
+    on = dataclasses.replace(env, stop_latch_bar=1.0)
+    assert Envelope.from_json(on.to_json()) == on
+    assert on.stops(1.0, -1, 0.01) and on.stops(2.0, 1, -0.01)  # against the gear
+    assert not on.stops(0.9, -1, 0.01)  # a weak brake: no latch
+    assert not on.stops(5.0, 1, 0.01) and not on.stops(5.0, 0, 0.01)  # along it, or park
+    with pytest.raises(CheckpointError, match="brake-stop latch"):
+        Envelope.from_json({**on.to_json(), "stop_latch_bar": -1.0})

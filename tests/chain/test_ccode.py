@@ -82,3 +82,23 @@ def test_native_engine_is_the_same_plant(chains):
         a, b = dep.step(c), nat.step(c)
         assert a.gear == b.gear
         assert abs(a.vx - b.vx) <= 1e-9 and abs(a.steer - b.steer) <= 1e-9
+
+
+def test_c_generation_and_onnx_refuse_the_brake_stop_latch():
+    """Neither the generated C nor the ONNX step implements the brake-stop latch: a chain
+    with it is refused in one line rather than stepped differently."""
+    import dataclasses
+
+    from parknss.chain import load_chain
+    from parknss.chain.ccode import chain_c_source
+    from parknss.config import SHIPPED_CHAIN
+    from parknss.errors import CheckpointError
+    from parknss.export.onnx_step import ChainStep
+
+    shipped = load_chain(SHIPPED_CHAIN).chain
+    env = dataclasses.replace(shipped.envelope, stop_latch_bar=1.0)
+    rt = DeployedChain(make_chain(shipped.nss, shipped.models(), env)).rt
+    with pytest.raises(CheckpointError, match="brake-stop latch"):
+        chain_c_source(rt)
+    with pytest.raises(CheckpointError, match="brake-stop latch"):
+        ChainStep(rt)

@@ -243,3 +243,32 @@ def test_brake_hold_latch_holds_a_car_at_rest_in_closed_loop_only(setup):
     for _ in range(200):  # release the brake and drive: the latch lets go
         _, st = plant.rt.step(1, float(env.cmd_hi[0]), 0.0, 0.0)
     assert abs(st[0]) > 0.05
+
+
+def test_brake_stop_latch_keeps_the_shipped_chain_from_rolling_through_zero():
+    """The shipped chain, reversing at 5.4 cm/s into a full brake, passes through zero and
+    rolls forward (issue 44, grid cell 30); with the brake-stop latch it never moves against
+    its gear and comes to rest, and the batched closed-loop rollout agrees with the
+    real-time step."""
+    import dataclasses
+
+    from parknss.config import SHIPPED_CHAIN
+
+    cmds = np.tile([-1.0, 0.0, -0.8, 0.0], (150, 1))
+    cmds[0, 2] = 0.0  # the histories start released (the brake has not acted yet)
+
+    def run(chain):
+        rt = DeployedChain(chain).rt
+        rt.start([-0.054, 0.0], [0.0, 0.0, 0.0], cmds[0])
+        return np.array([rt.step(*row)[1][0] for row in cmds.tolist()])
+
+    shipped = load_chain(SHIPPED_CHAIN).chain
+    v = run(shipped)
+    assert np.any(v > 0.0)  # rolls the wrong way under the brake
+    latched = make_chain(shipped.nss, shipped.models(),
+                         dataclasses.replace(shipped.envelope, stop_latch_bar=1.0))
+    vl = run(latched)
+    assert np.all(vl <= 0.0) and np.all(np.abs(vl[-50:]) < 1e-12)
+    r = latched.double().rollout(cmds[None], torch.tensor([[-0.054, 0.0]]), torch.zeros(1, 3),
+                                 gear_rule=True)
+    assert np.allclose(r.nss.vx[0].detach().numpy(), vl, atol=1e-9)

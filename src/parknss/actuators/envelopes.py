@@ -23,6 +23,13 @@ Input side, on the commands before the submodels:
   state is set to rest (vx 0, yaw rate 0) after the step, until the pressure falls below
   it. Replays of logs do not apply it (the logged gear and actuals already carry the
   car's behaviour; :mod:`parknss.chain.model`).
+* the brake-stop latch (optional, off by default; with the gear rule, closed loop only):
+  a brake only opposes motion and the drive pushes along the engaged gear, so a braked
+  car cannot move against its gear. With ``stop_latch_bar`` finite, a step at brake
+  pressure >= ``stop_latch_bar`` that ends with gear·vx < 0 (the learned brake, never
+  scored inside the blind zone, drives the car through zero and back: issue 44, grid
+  cell 30) ends at rest instead. The native engine and the ONNX step refuse a chain
+  with it.
 
 Output side, on the submodel outputs (never on measured channels): torque and pressure
 are held at their floors (>= 0), the steering angle is rate-limited to just above the
@@ -73,10 +80,13 @@ class Envelope:
     shift_time_s: float = 0.25
     hold_latch_bar: float = math.inf
     hold_latch_kmh: float = 0.5
+    stop_latch_bar: float = math.inf  # the brake-stop latch (module doc); inf: off
 
     def to_json(self) -> dict:
         d = asdict(self)
         d["hold_latch_bar"] = None if math.isinf(self.hold_latch_bar) else self.hold_latch_bar
+        if math.isinf(self.stop_latch_bar):  # off: the artefact stays as before the option
+            del d["stop_latch_bar"]
         return d
 
     @classmethod
@@ -90,6 +100,7 @@ class Envelope:
                 float(d.get("shift_time_s", cls.shift_time_s)),
                 math.inf if d.get("hold_latch_bar") is None else float(d["hold_latch_bar"]),
                 float(d.get("hold_latch_kmh", cls.hold_latch_kmh)),
+                math.inf if d.get("stop_latch_bar") is None else float(d["stop_latch_bar"]),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"invalid envelope ({exc})") from exc
@@ -97,6 +108,8 @@ class Envelope:
             raise CheckpointError("invalid envelope (negative or NaN gear-shift rule)")
         if not (env.hold_latch_bar >= 0.0 and env.hold_latch_kmh >= 0.0):
             raise CheckpointError("invalid envelope (negative or NaN brake-hold latch)")
+        if not env.stop_latch_bar >= 0.0:
+            raise CheckpointError("invalid envelope (negative or NaN brake-stop latch)")
         return env
 
     def held(self, pressure: float, vx: float) -> bool:
@@ -104,6 +117,11 @@ class Envelope:
         pressure (bar) reaches ``hold_latch_bar`` and |vx| (m/s) is inside the blind zone
         ``hold_latch_kmh``."""
         return pressure >= self.hold_latch_bar and abs(vx) < kmh_to_ms(self.hold_latch_kmh)
+
+    def stops(self, pressure: float, gear: float, vx: float) -> bool:
+        """The brake-stop latch (module doc): at pressure (bar) >= ``stop_latch_bar`` a
+        car moving (vx m/s) against its engaged gear (-1, 0, 1) is set to rest."""
+        return pressure >= self.stop_latch_bar and gear * vx < 0.0
 
     def shift_rule(self, dt: float = DT) -> ShiftByWire:
         """A fresh :class:`~parknss.actuators.shift.ShiftByWire` with this envelope's rule."""

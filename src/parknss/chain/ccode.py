@@ -330,6 +330,8 @@ def chain_c_source(rt: RealtimeChain, name: str = "parknss chain") -> CSource:
                      f"static double {ch}_step(pk_chain *s, double c, double vx, double yaw, "
                      f"double g) {{\n    (void)vx; (void)yaw; (void)g;\n{step}}}\n")
     rule = rt.shift
+    if math.isfinite(env.stop_latch_bar):
+        raise CheckpointError("the native engine does not implement the brake-stop latch")
     consts = {
         "DT": DT, "NSS_DT": nss.dt, "WHEELBASE": nss.L, "RATIO": nss.ratio,
         "DEG2RAD": math.pi / 180.0,

@@ -220,9 +220,13 @@ class Chain(nn.Module):
             Xs.append(x)
             Us.append(u)
             x = integrate(x, us)
-            if rule:  # the brake-hold latch (parknss.actuators.envelopes), closed loop only
+            if rule:  # the brake latches (parknss.actuators.envelopes), closed loop only
+                v_after = nss.vx_phys(x[:, 0])
                 held = (ys[1] >= env.hold_latch_bar) & (
-                    nss.vx_phys(x[:, 0]).abs() < kmh_to_ms(env.hold_latch_kmh))
+                    v_after.abs() < kmh_to_ms(env.hold_latch_kmh))
+                if env.stop_latch_bar < float("inf"):
+                    held = held | ((ys[1] >= env.stop_latch_bar)
+                                   & (g.to(v_after.dtype) * v_after < 0.0))
                 if bool(held.any()):
                     rest = nss.initial_state_scaled(torch.zeros_like(x0).to(dt_nss), us)
                     x = torch.where(held[:, None], rest, x)

@@ -200,8 +200,10 @@ class RealtimeChain:
         out = self.nss.readout(self.x, us)
         self.x = self.nss.advance(self.x, us)
         self.vx_now = self.nss.vx(self.x)
-        if self.shift is not None and self.env.env.held(act[1], self.vx_now):
-            self.x = self.nss.initial_state(_REST, u)  # the brake-hold latch (envelopes)
+        env = self.env.env
+        if self.shift is not None and (env.held(act[1], self.vx_now)
+                                       or env.stops(act[1], g, self.vx_now)):
+            self.x = self.nss.initial_state(_REST, u)  # the brake latches (envelopes)
             self.vx_now = self.nss.vx(self.x)
         self.yaw_prev = self.nss.yaw(self.x, us[3])[1]
         return act, out

@@ -41,7 +41,11 @@ def register(app: typer.Typer) -> None:
         candidate: str = typer.Option(
             "chain",
             "--candidate",
-            help="chain, or reference: the truth under another noise seed (the ceiling).",
+            help=(
+                "chain; reference: the truth under another noise seed (the ceiling); nss "
+                "or actuators: diagnosis hybrids (truth actuators + the chain's NSS, the "
+                "chain's actuators + the truth's body)."
+            ),
         ),
         no_figures: bool = typer.Option(False, "--no-figures", help="Skip the cell figures."),
         workers: int = WORKERS,
@@ -63,7 +67,9 @@ def register(app: typer.Typer) -> None:
         files = SimConfigFiles(config, interface, planning_config, scenarios_config, vehicle)
         specs = fidelity_specs(grid, cells, tpcap, scene)
         label = f"grid {grid}" if grid else f"TPCAP {tpcap}" if tpcap else "scenes"
-        label += "" if candidate == "chain" else f" ({candidate}, ceiling)"
+        label += {"chain": "", "reference": " (reference, ceiling)"}.get(
+            candidate, f" ({candidate} hybrid)"
+        )
         doc = run_fidelity(
             specs, out, label=label, files=files, fidelity_config=fidelity_config,
             figures=not no_figures, candidate=candidate, executor=executor, workers=workers,

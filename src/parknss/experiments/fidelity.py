@@ -25,7 +25,7 @@ from parknss.metrics.iso18571 import ISORatingConfig
 from parknss.outputs import run_folder
 from parknss.report.fidelity_figure import draw_fidelity, write_fidelity_html
 from parknss.sim import scenarios as sc
-from parknss.sim.closed_loop import SimConfigFiles
+from parknss.sim.closed_loop import SimConfigFiles, execute
 from parknss.sim.fidelity import (
     CellFidelity,
     cell_seed,
@@ -35,11 +35,12 @@ from parknss.sim.fidelity import (
     summarize_fidelity,
 )
 from parknss.sim.grid import config_paths, write_rows_csv
+from parknss.sim.hybrid import HYBRIDS, make_hybrid
 from parknss.sim.scene_formats import load_scene
 from parknss.sim.session import check_plants, run_cell
 
 PLANTS = ["chain", "reference"]
-CANDIDATES = ("chain", "reference")  # what is scored against the truth
+CANDIDATES = ("chain", "reference", *HYBRIDS)  # what is scored against the truth
 
 
 def fidelity_specs(
@@ -77,8 +78,11 @@ def fidelity_job(
     """Executor job: plan ``spec`` once, drive it under the candidate and the truth
     (noise seed ``seed``), score the pair (ISO settings ``iso``, ISORatingConfig fields)
     and draw its figure into ``figure_dir``; JSON. ``candidate`` "chain" (the learned
-    chain) or "reference" (the truth again under the noise seed ``seed + 1``: the
-    ceiling of every number, what the sensor noise alone costs)."""
+    chain), "reference" (the truth again under the noise seed ``seed + 1``: the
+    ceiling of every number, what the sensor noise alone costs), or a diagnosis hybrid
+    (:mod:`parknss.sim.hybrid`): "nss" (the truth's actuators driving the chain's NSS)
+    or "actuators" (the chain's actuator side driving the truth's body, noise seed
+    ``seed + 1``)."""
     if candidate not in CANDIDATES:
         raise ConfigError(f"--candidate {candidate!r}: one of {', '.join(CANDIDATES)}")
     f = SimConfigFiles(**files)
@@ -88,6 +92,18 @@ def fidelity_job(
     icfg = f.interface_config()
     if candidate == "chain":
         plan, (chain, truth) = run_cell(scene, PLANTS, cfg, icfg, f.planning, geom)
+    elif candidate in HYBRIDS:
+        plan, (truth,) = run_cell(scene, ["reference"], cfg, icfg, f.planning, geom)
+        chain = truth
+        if plan.trajectory is not None:
+            hyb = make_hybrid(
+                candidate,
+                chain_path=cfg.chain_path,
+                vehicle_yaml=cfg.reference_vehicle,
+                seed=seed + 1,
+                geom=geom,
+            )
+            chain = execute(scene, plan.trajectory, hyb, cfg, icfg, geom)
     else:
         plan, (truth,) = run_cell(scene, ["reference"], cfg, icfg, f.planning, geom)
         other = override(cfg, {"plant_seed": seed + 1}, source="fidelity ceiling seed")
@@ -107,7 +123,7 @@ def fidelity_job(
                  f"{truth.reason} {truth.duration_s:.1f} s; ISO vx {_f(cell.iso_vx)}, "
                  f"ω_z {_f(cell.iso_yaw_rate)}")  # fmt: skip
         path = Path(figure_dir) / f"fidelity_{scene.meta.name}.png"
-        name = candidate if candidate == "chain" else "truth, seed + 1"
+        name = {"chain": "chain", "reference": "truth, seed + 1"}.get(candidate, candidate)
         runs = {name: chain.series, "reference": truth.series}
         doc["figure"] = str(draw_fidelity(runs, path, title))
     return doc
@@ -210,7 +226,12 @@ def run_fidelity(
         cells = [None if d["fidelity"] is None else CellFidelity(**d["fidelity"]) for d in docs]
         summary = summarize_fidelity(cells, fcfg.targets)
         text = fidelity_text(summary)
-        who = "the chain" if candidate == "chain" else "the truth under another seed (ceiling)"
+        who = {
+            "chain": "the chain",
+            "reference": "the truth under another seed (ceiling)",
+            "nss": "the truth's actuators + the chain's NSS (hybrid)",
+            "actuators": "the chain's actuators + the truth's body (hybrid)",
+        }[candidate]
         title = f"Closed-loop fidelity of {who} against the truth: {label}"
         report = {"label": label, "cells": len(specs), "wall_s": round(wall, 2),
                   "summary": summary.to_json(), "text": text, "per_cell": docs}  # fmt: skip

@@ -267,6 +267,8 @@ class ChainStep(nn.Module):
             raise CheckpointError("ONNX export needs a chain with all three submodels")
         self.layout = StateLayout.of(rt)
         e = rt.env.env
+        if math.isfinite(e.stop_latch_bar):
+            raise CheckpointError("ONNX export does not implement the brake-stop latch")
         self.lo, self.hi = _t(e.cmd_lo), _t(e.cmd_hi)
         self.env = e
         self.max_speed, self.n_shift = rt.shift.max_speed, float(rt.shift.n_shift)
