@@ -204,3 +204,41 @@ def test_config_mismatch_rules():
     assert "train.recipe" in config_mismatch(rec, {**want, "train": {**want["train"],
                                                                      "recipe": "fast"}})
     assert "state_units" in config_mismatch(rec, {**want, "model": {"state_units": 64}})
+
+
+def test_from_a_folder_of_logs(env, tmp_path, capsys):
+    from parknss.data.io import read_campaign, write_trial
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for tr in read_campaign(env / "data"):
+        write_trial(tr, logs / f"{tr.id}.csv")
+    out = tmp_path / "car"
+    assert main(["identify", str(logs), "--out", str(out), "--stages", "data", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["data"]["action"] == "ran"
+    assert read_campaign(out / "data").data_hash() == read_campaign(env / "data").data_hash()
+    card = json.loads((out / "model_card.json").read_text())
+    assert card["data"]["trials"] == 8 and card["data"]["truth"] is None
+    assert any(s["stage"] == "fidelity" and s["status"] == "not run" for s in card["stages"])
+    # the logs' digest is their content: rewriting a file unchanged keeps the stage
+    (logs / "park_in_left_r1.csv").write_text((logs / "park_in_left_r1.csv").read_text())
+    assert main(["identify", str(logs), "--out", str(out), "--stages", "data", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stages"]["data"]["action"] == "skipped"
+
+
+def test_truth_is_found_only_for_the_recorded_vehicle():
+    from parknss.experiments.identify.reuse import truth_vehicle
+    from parknss.reference.params import load_vehicle_params
+
+    digest = load_vehicle_params(None).digest()
+    meta = {"synthetic": True, "vehicle_yaml": None, "vehicle_params_digest": digest}
+    assert truth_vehicle(meta) is not None and truth_vehicle(meta)[0] is None
+    assert truth_vehicle({**meta, "vehicle_params_digest": "0" * 16}) is None
+    assert truth_vehicle({**meta, "synthetic": False}) is None
+    from parknss.config import CONFIG_DIR
+
+    alt = load_vehicle_params(CONFIG_DIR / "reference_vehicle_alt.yaml").digest()
+    found = truth_vehicle({"synthetic": True, "vehicle_yaml": "configs/reference_vehicle_alt.yaml",
+                           "vehicle_params_digest": alt})
+    assert found is not None and found[0].name == "reference_vehicle_alt.yaml"
