@@ -242,3 +242,21 @@ def test_truth_is_found_only_for_the_recorded_vehicle():
     found = truth_vehicle({"synthetic": True, "vehicle_yaml": "configs/reference_vehicle_alt.yaml",
                            "vehicle_params_digest": alt})
     assert found is not None and found[0].name == "reference_vehicle_alt.yaml"
+
+
+def test_given_interface_gains_are_recorded_not_tuned(env, car, tmp_path, capsys):
+    import shutil
+
+    from parknss.config import CONFIG_DIR
+
+    out = tmp_path / "car"
+    shutil.copytree(car, out)
+    args = _args(env, out, "--interface", str(CONFIG_DIR / "interface.yaml"), "--json")
+    args[args.index("--stages") + 1] = STAGES + ",tune"
+    assert main(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["chain"]["action"] == "skipped"
+    assert doc["stages"]["tune"]["action"] == "reused"
+    assert "not tuned here" in doc["stages"]["tune"]["reused"]
+    card = json.loads((out / "model_card.json").read_text())
+    assert {s["stage"]: s["status"] for s in card["stages"]}["tune"] == "done"

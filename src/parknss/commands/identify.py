@@ -41,6 +41,8 @@ def register(app: typer.Typer) -> None:
             None, "--selection", help="selection.json or chain folder whose winners to use."),
         actuator_config: Path | None = typer.Option(
             None, "--actuator-config", help="Actuator YAML."),
+        interface: Path | None = typer.Option(
+            None, "--interface", help="Interface gains YAML to use instead of tuning."),
         stages: str | None = typer.Option(
             None, "--stages", help="Comma list of stages to run (default: all)."),
         skip_export: bool = typer.Option(False, "--skip-export", help="No FMU/ONNX."),
@@ -63,7 +65,8 @@ def register(app: typer.Typer) -> None:
         inputs = IdentifyInputs(
             out=out, logs=logs, mapping=mapping, data=data, recipe=recipe,
             nss_overrides=cli_overrides(set_), nss=nss, allow_code_change=allow_code_change,
-            selection=selection, actuator_config=actuator_config, stages=names,
+            selection=selection, actuator_config=actuator_config, interface=interface,
+            stages=names,
             skip_export=skip_export, executor=executor, workers=workers, address=address,
             overrides=parse_set(set_identify, option="--identify-set"), overwrite=overwrite)
         doc = run_identify(inputs, _log)

@@ -137,6 +137,12 @@ def domain_section(facts: dict, export: StageRecord | None) -> dict:
     return dom
 
 
+def _gains_source(tune: StageRecord | None) -> str | None:
+    if tune is None:
+        return None
+    return tune.reused or "tuned on this chain (parknss tune, the 12-cell core)"
+
+
 def build_card(rec: dict[str, StageRecord], recipe: str, inputs: IdentifyInputs) -> ModelCard:
     """The card of the stage records ``rec`` (missing stages: sections say "not run")."""
     facts = rec["data"].product["facts"]
@@ -147,7 +153,10 @@ def build_card(rec: dict[str, StageRecord], recipe: str, inputs: IdentifyInputs)
     stages = []
     for s in STAGES:
         r = rec.get(s)
-        stages.append({"stage": s, "status": "not run" if r is None else r.status,
+        status = "not run" if r is None else r.status
+        if s == "card":
+            status = "this card"
+        stages.append({"stage": s, "status": status,
                        "reused": None if r is None else r.reused,
                        "wall_s": None if r is None else round(r.wall_total_s, 1),
                        "sittings": None if r is None else r.sittings,
@@ -177,7 +186,8 @@ def build_card(rec: dict[str, StageRecord], recipe: str, inputs: IdentifyInputs)
                                                "cells": grid.product.get("cells"),
                                                "summary": grid.product.get("summary"),
                                                "gains": (rec["tune"].product.get("gains")
-                                                         if rec.get("tune") else None)},
+                                                         if rec.get("tune") else None),
+                                               "gains_source": _gains_source(rec.get("tune"))},
         fidelity=None if fid is None else fid.product,
         domain=domain_section(facts, rec.get("export")),
         not_for=not_for(facts, rec),

@@ -31,9 +31,9 @@ def esc(x: object) -> str:
 def num(v: object, fmt: str = ".4g") -> str:
     if v is None:
         return "–"
-    if isinstance(v, bool):
+    if isinstance(v, bool | int):
         return esc(v)
-    if isinstance(v, int | float):
+    if isinstance(v, float):
         return esc(format(v, fmt))
     return esc(v)
 
@@ -66,7 +66,7 @@ def _data(card: ModelCard) -> str:
             ["data hash", d.get("data_hash")],
             ["truth", (d.get("truth") or {}).get("note", "none (not a synthetic campaign of a "
                                                       "reference vehicle found here)")]]
-    out = table(["", ""], rows)
+    out = table(["item", "value"], rows)
     cond = d.get("conditions")
     if cond:
         crow = []
@@ -141,7 +141,7 @@ def _closed_loop(card: ModelCard) -> str:
             ("duration_mean_s", "duration mean [s]")]
     rows = [[lab, *[c["summary"][p].get(k) for p in plants]] for k, lab in keys]
     out = f"<p>Grid {esc(c.get('grid'))} ({esc(c.get('cells'))} cells) of this car's geometry"
-    out += "; interface gains tuned on this chain.</p>" if c.get("gains") else ".</p>"
+    out += f"; interface gains: {esc(c['gains_source'])}.</p>" if c.get("gains") else ".</p>"
     out += table(["Table V", *plants], rows, ".3g")
     if c.get("gains"):
         out += table(["gain", "value"], [[k, v] for k, v in c["gains"].items()])

@@ -42,7 +42,7 @@ class IdentifyConfig(StrictModel):
     grid_cells: str | None = None
     tune_rounds: int = Field(1, ge=1)
     fidelity_grid: Literal["36", "12", "252"] = "12"
-    fidelity_cells: str | None = "0-3"
+    fidelity_cells: str | None = "2,8,14,20"
     estimate_s: StageEstimates = StageEstimates()
 
 
@@ -68,6 +68,8 @@ class IdentifyInputs:
             shown equal to the current one by the canary lineage (the card says so).
         selection: a ``selection.json`` or a chain folder whose winners to reuse.
         actuator_config: actuator YAML (None: shipped).
+        interface: interface-gains YAML to use instead of tuning them (the ``tune``
+            stage then records it as given, not tuned here).
         stages: the stages to run (None: all); the others are skipped and say so.
         skip_export: leave the FMU/ONNX exports out.
         executor, workers, address: how the stages that fan out run.
@@ -85,6 +87,7 @@ class IdentifyInputs:
     allow_code_change: bool = False
     selection: Path | None = None
     actuator_config: Path | None = None
+    interface: Path | None = None
     stages: tuple[str, ...] | None = None
     skip_export: bool = False
     executor: str = "local"

@@ -100,6 +100,8 @@ class Pipeline:
         table["nss"] = nss
         if self.inp.selection is not None:
             table["selection"] = 1.0
+        if self.inp.interface is not None:
+            table["tune"] = 1.0
         return {s: (table[s] if s in wanted else 0.0) for s in STAGES}
 
     def campaign_dir(self) -> Path:
@@ -298,9 +300,21 @@ class Pipeline:
     def stage_tune(self) -> StageRecord:
         from parknss.sim.tuning import tune_gains
 
-        inputs = {**self._sim_inputs(), "rounds": self.cfg.tune_rounds}
+        given = self.inp.interface
+        inputs = {**self._sim_inputs(), "rounds": self.cfg.tune_rounds,
+                  "given": _file_sha(given)}
 
         def body(fresh: bool) -> StageOutcome:
+            if given is not None:
+                from parknss.sim.control.interface import load_interface_config
+                from parknss.sim.tuning import TuningConfig
+
+                icfg = load_interface_config(given)
+                tuned = TuningConfig().gains
+                return StageOutcome({"interface": str(Path(given).resolve()),
+                                     "gains": {k: getattr(icfg, k) for k in tuned}},
+                                    reused=f"interface gains given by --interface {given}, "
+                                           "not tuned here")
             doc = tune_gains("chain", self.car / "tune", rounds=self.cfg.tune_rounds,
                              files=self.sim_files(), executor=self.inp.executor,
                              workers=self.inp.workers, address=self.inp.address,
@@ -445,7 +459,11 @@ def run_identify(inputs: IdentifyInputs, say: Say = _quiet) -> dict:
     cfg = load_identify_config(inputs.config, **inputs.overrides)
     wanted = wanted_stages(inputs)
     pipe = Pipeline(inputs, cfg, say)
-    pipe.nss_config()  # a bad --set is refused before any work
+    pipe.nss_config()  # a bad --set is refused before any work, and so are bad cells
+    from parknss.sim.scenarios import grid_cells
+
+    grid_cells(cfg.grid, None, cfg.grid_cells)
+    grid_cells(cfg.fidelity_grid, None, cfg.fidelity_cells)
     pipe.book.estimates = pipe.estimates(wanted)
     source = {"logs": inputs.logs, "mapping": inputs.mapping, "data": inputs.data}
     with run_folder(inputs.out, command="parknss identify", args=source,
