@@ -38,6 +38,7 @@ app = typer.Typer(
 
 # Modules in parknss.commands, each with register(app).
 COMMAND_MODULES: tuple[str, ...] = (
+    "identify",
     "campaign",
     "demo",
     "reproduce",

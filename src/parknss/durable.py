@@ -45,6 +45,7 @@ CRASH_POINTS: tuple[str, ...] = (
     "train_state.meta_tmp",  # the new JSON written to its temporary file
     "train_state.meta",  # the new JSON renamed into place (the commit), not yet tidied
     "artefact.tmp",  # an artefact folder written and flushed, not yet renamed into place
+    "identify.stage",  # an identify stage's product written, its done record not yet
 )
 """The named crash points of the writers (see :func:`crash_point`)."""
 

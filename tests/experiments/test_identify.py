@@ -1,0 +1,262 @@
+"""``parknss identify`` on a tiny campaign with tiny budgets: the stages run and write the
+model card, a rerun skips them, an interrupted stage resumes, a campaign lacking a channel
+is refused before any work, hostile names are escaped in the card, and a given NSS whose
+data or config differ is never reused."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import pytest
+import torch
+import yaml
+
+from helpers.actuators import tiny_campaign, tiny_config
+from helpers.kills import run_killed
+from helpers.synth import drop
+from parknss.cli import main
+from parknss.data.io import write_campaign
+from parknss.data.trial import Campaign, Trial
+from parknss.experiments.identify import pipeline as pipeline_mod
+from parknss.experiments.identify.card_html import card_html
+from parknss.experiments.identify.config import IdentifyInputs
+from parknss.experiments.identify.pipeline import run_identify
+from parknss.experiments.identify.reuse import config_mismatch
+from parknss.outputs import interrupt_note
+
+torch.set_num_threads(1)
+
+NSS_SET = ["model.state_units=8", "model.state_layers=1", "model.output_units=8",
+           "model.output_layers=1", "train.epochs=2", "train.checkpoint_every=1"]
+STAGES = "data,nss,selection,chain,rating,card"
+
+
+@pytest.fixture(scope="module")
+def env(tmp_path_factory):
+    root = tmp_path_factory.mktemp("identify")
+    write_campaign(tiny_campaign(), root / "data")
+    (root / "act.yaml").write_text(yaml.safe_dump(json.loads(tiny_config().model_dump_json())))
+    return root
+
+
+def _args(env, out, *extra):
+    sets = [x for s in NSS_SET for x in ("--set", s)]
+    return ["identify", "--data", str(env / "data"), "--out", str(out), "--actuator-config",
+            str(env / "act.yaml"), "--stages", STAGES, *sets, *extra]
+
+
+def _inputs(env, out, **kw):
+    from parknss.nss.config import cli_overrides
+
+    return IdentifyInputs(out=out, data=env / "data", actuator_config=env / "act.yaml",
+                          stages=tuple(STAGES.split(",")), nss_overrides=cli_overrides(NSS_SET),
+                          **kw)
+
+
+@pytest.fixture(scope="module")
+def car(env, tmp_path_factory):
+    """One finished run (module scope: the stages take a few seconds)."""
+    out = tmp_path_factory.mktemp("car") / "car"
+    assert main(_args(env, out, "--json")) == 0
+    return out
+
+
+def test_pipeline_writes_the_chain_and_the_card(car):
+    assert (car / "chain" / "chain.json").is_file()
+    assert (car / "nss" / "model" / "model.json").is_file()
+    card = json.loads((car / "model_card.json").read_text())
+    assert card["format"] == "parknss-model-card/1"
+    assert card["data"]["trials"] == 8
+    assert set(card["data"]["classes"]) == {"park_in_left", "park_in_right", "park_out_left",
+                                            "park_out_right"}
+    assert card["data"]["channels_absent"] == []
+    assert card["data"]["ranges"]["steer_cmd"]["max"] > card["data"]["ranges"]["steer_cmd"]["min"]
+    assert {"all_measured", "cotuned_target", "monolithic"} <= set(card["table4"]["rows"])
+    assert 0.0 <= card["iso"]["mean_raw"] <= 1.0
+    nss = card["open_loop"]["nss_open_loop"]["logged"]
+    assert nss["vx_mse_moving_kmh2"] >= 0 and "seed" in card["open_loop"]["seed_spread"]
+    assert card["not_for"] and any("speeds above" in x for x in card["not_for"])
+    st = {s["stage"]: s["status"] for s in card["stages"]}
+    assert st["chain"] == "done" and st["grid"] == "not run"
+    page = (car / "model_card.html").read_text()
+    assert page.startswith("<!DOCTYPE html>") and "Table IV" in page
+    assert "<script" not in page and "http" not in page.replace("http-equiv", "")
+
+
+def test_rerun_skips_finished_stages(env, car, capsys):
+    before = {p.name: p.stat().st_mtime_ns for p in (car / "stages").iterdir()}
+    assert main(_args(env, car, "--json")) == 0
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert {doc["stages"][s]["action"] for s in STAGES.split(",") if s != "card"} == {"skipped"}
+    assert "skipped" in cap.err
+    after = {p.name: p.stat().st_mtime_ns for p in (car / "stages").iterdir()}
+    assert before == after
+
+
+def test_changed_input_reruns_that_stage_and_later_ones(env, car, tmp_path, capsys):
+    import shutil
+
+    out = tmp_path / "car"
+    shutil.copytree(car, out)
+    args = _args(env, out, "--json")
+    args[args.index("train.epochs=2")] = "train.epochs=3"
+    assert main(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["data"]["action"] == "skipped"
+    assert doc["stages"]["nss"]["action"] == "ran"
+    assert doc["stages"]["chain"]["action"] == "ran"
+
+
+def test_interrupted_stage_resumes(env, tmp_path, monkeypatch):
+    out = tmp_path / "car"
+    # a kill between a finished chain stage and its record: the next run redoes it only
+    code = run_killed(lambda: run_identify(_inputs(env, out)), crash="identify.stage:4")
+    assert code == signal.SIGKILL
+    rec = json.loads((out / "stages" / "chain.json").read_text())
+    assert rec["status"] == "running"
+    assert json.loads((out / "stages" / "nss.json").read_text())["status"] == "done"
+    doc = run_identify(_inputs(env, out))
+    assert doc["stages"]["nss"]["action"] == "skipped"
+    assert doc["stages"]["chain"]["action"] == "resumed"
+    assert json.loads((out / "stages" / "chain.json").read_text())["sittings"] == 2
+
+    # Ctrl-C inside a stage: one resume line naming identify, the stage and the folder
+    def boom(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline_mod.Pipeline, "stage_rating", boom)
+    os.environ.pop("PARKNSS_CRASH_AT", None)
+    out2 = tmp_path / "car2"
+    with pytest.raises(KeyboardInterrupt):
+        run_identify(_inputs(env, out2))
+    note = interrupt_note(clear=True)
+    assert "stage rating" in note and "resume with `parknss identify" in note
+    assert str(out2) in note
+
+
+def test_campaign_lacking_a_channel_is_refused_before_any_work(env, tmp_path, capsys):
+    from parknss.data.io import read_campaign
+
+    part = drop(read_campaign(env / "data"), ["decel_cmd"])
+    write_campaign(part, tmp_path / "part")
+    out = tmp_path / "car"
+    args = _args(env, out)
+    args[args.index("--data") + 1] = str(tmp_path / "part")
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("parknss: error:") and "decel_cmd" in err[0]
+    assert not (out / "nss").exists()
+
+
+def test_hostile_names_are_escaped(env, tmp_path):
+    from parknss.data.io import read_campaign
+    from parknss.experiments.identify.card import ModelCard
+
+    base = read_campaign(env / "data")
+    evil = '<script>alert("x")</script>'
+    camp = Campaign([Trial(t.id, t.maneuver, t.repetition, t.channels) for t in base],
+                    name=evil)
+    from parknss.experiments.identify.data_stage import campaign_facts
+
+    facts = campaign_facts(camp)
+    card = ModelCard(format="f", generated_utc="t", parknss_git="g", car=evil, chain=evil,
+                     recipe="paper", data=facts, nss={"reused": evil}, open_loop={"note": evil},
+                     table4=None, iso=None, closed_loop=None, fidelity={"skipped": evil},
+                     domain={"seen": {}}, not_for=[evil], stages=[])
+    page = card_html(card)
+    assert "<script>" not in page and "&lt;script&gt;" in page
+
+
+def test_given_nss_is_reused_only_when_it_matches(env, car, tmp_path, capsys):
+    model = car / "nss" / "model"
+    ok = tmp_path / "ok"
+    assert main(_args(env, ok, "--nss", str(model), "--json")) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["nss"]["action"] == "reused"
+    assert "match" in doc["stages"]["nss"]["reused"]
+    # another config: refused in one line, nothing reused
+    bad = tmp_path / "bad"
+    args = _args(env, bad, "--nss", str(model))
+    args[args.index("train.epochs=2")] = "train.epochs=5"
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "train.epochs" in err and "not reused" in err
+    # another campaign: refused
+    other = tmp_path / "other"
+    from parknss.data.io import read_campaign
+
+    camp = read_campaign(env / "data")
+    write_campaign(Campaign(camp.trials[:-1], name="other"), other)
+    args = _args(env, tmp_path / "bad2", "--nss", str(model))
+    args[args.index("--data") + 1] = str(other)
+    assert main(args) == 2
+    assert "fitted on data" in capsys.readouterr().err
+
+
+def test_config_mismatch_rules():
+    rec = {"train": {"epochs": 3200, "lr": 0.002}, "model": {"state_units": 128}}
+    want = {"train": {"epochs": 3200, "lr": 0.002, "recipe": "paper"},
+            "model": {"state_units": 128}, "fast": {"updates": 2000}}
+    assert config_mismatch(rec, want) is None
+    assert "train.recipe" in config_mismatch(rec, {**want, "train": {**want["train"],
+                                                                     "recipe": "fast"}})
+    assert "state_units" in config_mismatch(rec, {**want, "model": {"state_units": 64}})
+
+
+def test_from_a_folder_of_logs(env, tmp_path, capsys):
+    from parknss.data.io import read_campaign, write_trial
+
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    for tr in read_campaign(env / "data"):
+        write_trial(tr, logs / f"{tr.id}.csv")
+    out = tmp_path / "car"
+    assert main(["identify", str(logs), "--out", str(out), "--stages", "data", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["data"]["action"] == "ran"
+    assert read_campaign(out / "data").data_hash() == read_campaign(env / "data").data_hash()
+    card = json.loads((out / "model_card.json").read_text())
+    assert card["data"]["trials"] == 8 and card["data"]["truth"] is None
+    assert any(s["stage"] == "fidelity" and s["status"] == "not run" for s in card["stages"])
+    # the logs' digest is their content: rewriting a file unchanged keeps the stage
+    (logs / "park_in_left_r1.csv").write_text((logs / "park_in_left_r1.csv").read_text())
+    assert main(["identify", str(logs), "--out", str(out), "--stages", "data", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stages"]["data"]["action"] == "skipped"
+
+
+def test_truth_is_found_only_for_the_recorded_vehicle():
+    from parknss.experiments.identify.reuse import truth_vehicle
+    from parknss.reference.params import load_vehicle_params
+
+    digest = load_vehicle_params(None).digest()
+    meta = {"synthetic": True, "vehicle_yaml": None, "vehicle_params_digest": digest}
+    assert truth_vehicle(meta) is not None and truth_vehicle(meta)[0] is None
+    assert truth_vehicle({**meta, "vehicle_params_digest": "0" * 16}) is None
+    assert truth_vehicle({**meta, "synthetic": False}) is None
+    from parknss.config import CONFIG_DIR
+
+    alt = load_vehicle_params(CONFIG_DIR / "reference_vehicle_alt.yaml").digest()
+    found = truth_vehicle({"synthetic": True, "vehicle_yaml": "configs/reference_vehicle_alt.yaml",
+                           "vehicle_params_digest": alt})
+    assert found is not None and found[0].name == "reference_vehicle_alt.yaml"
+
+
+def test_given_interface_gains_are_recorded_not_tuned(env, car, tmp_path, capsys):
+    import shutil
+
+    from parknss.config import CONFIG_DIR
+
+    out = tmp_path / "car"
+    shutil.copytree(car, out)
+    args = _args(env, out, "--interface", str(CONFIG_DIR / "interface.yaml"), "--json")
+    args[args.index("--stages") + 1] = STAGES + ",tune"
+    assert main(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["stages"]["chain"]["action"] == "skipped"
+    assert doc["stages"]["tune"]["action"] == "reused"
+    assert "not tuned here" in doc["stages"]["tune"]["reused"]
+    card = json.loads((out / "model_card.json").read_text())
+    assert {s["stage"]: s["status"] for s in card["stages"]}["tune"] == "done"
