@@ -137,6 +137,28 @@ def test_interrupted_stage_resumes(env, tmp_path, monkeypatch):
     assert str(out2) in note
 
 
+def test_killed_once_in_each_stage_and_resumed(env, car, tmp_path):
+    """SIGKILL once in every stage (after its work, before its record: the worst instant),
+    each rerun redoes that stage only and goes on; the final chain is bit-identical to the
+    uninterrupted run's."""
+    out = tmp_path / "car"
+    stages = STAGES.split(",")
+    for i, stage in enumerate(stages):
+        # the first run dies in its first stage; each rerun redoes the killed stage (hit 1)
+        # and dies in the next one (hit 2)
+        crash = "identify.stage:1" if i == 0 else "identify.stage:2"
+        assert run_killed(lambda: run_identify(_inputs(env, out)), crash=crash) == signal.SIGKILL
+        recs = {s: json.loads((out / "stages" / f"{s}.json").read_text())["status"]
+                for s in stages[: i + 1]}
+        assert recs[stage] == "running"
+        assert all(recs[s] == "done" for s in stages[:i])
+    doc = run_identify(_inputs(env, out))
+    assert [doc["stages"][s]["action"] for s in stages[:-1]] == ["skipped"] * (len(stages) - 1)
+    assert doc["stages"][stages[-1]]["action"] == "resumed"
+    for name in ("chain/actuators.safetensors", "nss/model/model.safetensors"):
+        assert (out / name).read_bytes() == (car / name).read_bytes()
+
+
 def test_campaign_lacking_a_channel_is_refused_before_any_work(env, tmp_path, capsys):
     from parknss.data.io import read_campaign
 
