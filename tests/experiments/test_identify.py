@@ -159,6 +159,43 @@ def test_killed_once_in_each_stage_and_resumed(env, car, tmp_path):
         assert (out / name).read_bytes() == (car / name).read_bytes()
 
 
+def test_nss_stage_kept_across_accepted_code_versions_and_record_formats(env, car, tmp_path,
+                                                                         capsys, monkeypatch):
+    """A finished NSS stage recorded under a training-code version the canary lineage
+    accepts as equal, with its config written in full (older records), is still the same
+    stage; a version outside the lineage is a change."""
+    import shutil
+
+    from parknss.config import REPO_ROOT
+    from parknss.experiments.identify.stages import digest_of, plain
+    from parknss.experiments.lineage import accepted_versions
+    from parknss.experiments.store import code_version, store_dir
+    from parknss.nss.config import NSSConfig
+
+    store = tmp_path / "store"  # the checkout's lineage, read from a copy
+    shutil.copytree(REPO_ROOT / "results" / "lineage", store / "lineage")
+    monkeypatch.setenv("PARKNSS_RESULTS", str(store))
+    versions = accepted_versions(store_dir(None), code_version())
+    if len(versions) < 2:
+        pytest.skip("the store's lineage accepts no other version of this code")
+    out = tmp_path / "car"
+
+    def rerun_with(version):
+        shutil.rmtree(out, ignore_errors=True)
+        shutil.copytree(car, out)
+        p = out / "stages" / "nss.json"
+        rec = json.loads(p.read_text())
+        full = NSSConfig.model_validate(rec["inputs"]["config"]).model_dump(mode="json")
+        rec["inputs"].update(code_version=version, config=full)
+        rec["digest"] = digest_of(plain(rec["inputs"]))
+        p.write_text(json.dumps(rec))
+        assert main(_args(env, out, "--json")) == 0
+        return json.loads(capsys.readouterr().out)["stages"]["nss"]["action"]
+
+    assert rerun_with(versions[1]) == "skipped"
+    assert rerun_with("0123456789abcdef") == "ran"
+
+
 def test_campaign_lacking_a_channel_is_refused_before_any_work(env, tmp_path, capsys):
     from parknss.data.io import read_campaign
 

@@ -57,6 +57,17 @@ def _quiet(msg: str) -> None:
     pass
 
 
+def _identity_of(recorded: object) -> dict | None:
+    """:func:`~parknss.nss.config.fit_identity` of a config recorded as JSON by an older
+    stage record (which kept every field), or None when it no longer validates."""
+    from parknss.nss.config import NSSConfig, fit_identity
+
+    try:
+        return fit_identity(NSSConfig.model_validate(recorded))
+    except ValueError:
+        return None
+
+
 def manifest_digest(folder: Path) -> str:
     """SHA-256 of an artefact's SHA256SUMS (its content, as the loader verifies it)."""
     return hashlib.sha256((Path(folder) / "SHA256SUMS").read_bytes()).hexdigest()[:16]
@@ -179,15 +190,20 @@ class Pipeline:
 
     def stage_nss(self) -> StageRecord:
         from parknss.experiments.identify.reuse import check_nss
+        from parknss.experiments.lineage import accepted_versions
         from parknss.experiments.store import code_version, store_dir
         from parknss.experiments.training import TrainInputs, train_deployment
         from parknss.nss import train_state
+        from parknss.nss.config import fit_identity
 
         cfg = self.nss_config()
         wanted = cfg.model_dump(mode="json")
         data_hash = self.rec["data"].product["facts"]["data_hash"]
         given = self.inp.nss
-        inputs = {"data_hash": data_hash, "config": wanted, "code_version": code_version(),
+        # the fields that decide the fit's numbers (a new option at its default, which
+        # keeps the old behaviour, is not a change), and the training-code version
+        inputs = {"data_hash": data_hash, "config": fit_identity(cfg),
+                  "code_version": code_version(),
                   "nss": None if given is None else {"path": given,
                                                      "sha": manifest_digest(given)},
                   "allow_code_change": self.inp.allow_code_change}
@@ -213,7 +229,10 @@ class Pipeline:
                                  "training": {k: v for k, v in doc.items()
                                               if k not in ("train_trials", "val_trials")}})
 
-        return self.book.run("nss", inputs, body)
+        root = store_dir(None)
+        return self.book.run("nss", inputs, body, equivalent={
+            "code_version": lambda rec, now: root is not None and rec in accepted_versions(root, now),
+            "config": lambda rec, now: _identity_of(rec) == now})
 
     def stage_selection(self) -> StageRecord:
         from parknss.actuators.phase_a import Fanout

@@ -103,6 +103,15 @@ class StageOutcome:
     reused: str | None = None
 
 
+def _same_inputs(recorded: Mapping[str, Any], now: Mapping[str, Any],
+                 equivalent: Mapping[str, Callable[[Any, Any], bool]]) -> bool:
+    """Every input equal, or equivalent by its ``equivalent`` rule."""
+    if set(recorded) != set(now):
+        return False
+    return all(recorded[k] == now[k] or (k in equivalent and equivalent[k](recorded[k], now[k]))
+               for k in now)
+
+
 class StageBook:
     """The records of one car folder and the progress display (stderr lines via ``say``)."""
 
@@ -133,14 +142,22 @@ class StageBook:
         return sum(self.estimates.get(s, 0.0) for s in self.order[i:])
 
     def run(self, stage: str, inputs: Mapping[str, Any],
-            body: Callable[[bool], StageOutcome]) -> StageRecord:
+            body: Callable[[bool], StageOutcome],
+            equivalent: Mapping[str, Callable[[Any, Any], bool]] | None = None
+            ) -> StageRecord:
         """Skip, resume or run ``stage`` (module doc); ``body(fresh)`` computes it
-        (``fresh``: replace whatever an earlier run of the stage left)."""
+        (``fresh``: replace whatever an earlier run of the stage left). ``equivalent``
+        maps an input name to ``same(recorded, now)``: a recorded input that differs but
+        is equivalent (e.g. a training-code version the canary lineage accepts) still
+        counts as the same, and the record keeps what it recorded."""
         n, i = len(self.order), self.order.index(stage) + 1
         head = f"stage {i}/{n} {stage}"
         inputs = plain(dict(inputs))
         digest = digest_of(inputs)
         old = self.read(stage)
+        if old is not None and old.digest != digest and equivalent and _same_inputs(
+                old.inputs, inputs, equivalent):
+            inputs, digest = dict(old.inputs), old.digest
         if old is not None and old.status == "done" and old.digest == digest:
             why = f" ({old.reused})" if old.reused else ""
             self.say(f"{head}: finished earlier with the same inputs, skipped{why}")
