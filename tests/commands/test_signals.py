@@ -183,6 +183,7 @@ def test_reproduce_keeps_its_cache(sig, code, word, tmp_path):
                               sig, tmp_path)
     assert rc == code
     line = _one_line(lines, word)
-    assert f"kept in {cache}; run the same command again to resume" in line
+    assert "jobs (fits, cells) finished and kept in the run cache" in line
+    assert f"{out / 'report.html'}" in line and "run the same command again to resume" in line
     assert len(list(cache.glob("*.json"))) >= 2
     assert not list(cache.glob(".*tmp*"))

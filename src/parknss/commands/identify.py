@@ -23,7 +23,7 @@ def _log(msg: str) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("identify")
+    @app.command("identify", short_help="From logs to a plant and its model card, resumably.")
     def identify(
         logs: Path | None = typer.Argument(None, help="Folder of logs, one file per trial."),
         out: Path = typer.Option(..., "--out", help="The car folder (every stage's product)."),

@@ -150,6 +150,28 @@ def plan_scene(
     return plan
 
 
+def _unsnap_kept(rr, coarse: Trajectory, cfg: PlanningConfig):
+    """``rr`` with each segment the refinement kept at the lock (its coarse poses with a
+    trapezoidal profile) taken from the search's own, unrounded, coarse segment: the
+    rounded copy would bend up to ~5e-5 beyond the lock by the rounding alone."""
+    from parknss.sim.planning.refine_profile import profile_segment
+
+    traj = rr.trajectory
+    if traj is None or len(traj.segments) != len(coarse.segments) or len(rr.segments) != len(
+        coarse.segments
+    ):
+        return rr
+    if not any(d.get("status") == "kept (at the lock)" for d in rr.segments):
+        return rr
+    rc = cfg.refine
+    segs = [
+        profile_segment(c, rc.speed_max_ms, rc.accel_max_ms2)
+        if d.get("status") == "kept (at the lock)" else s
+        for s, c, d in zip(traj.segments, coarse.segments, rr.segments, strict=True)
+    ]
+    return replace(rr, trajectory=replace(traj, segments=segs))
+
+
 def _plan_in(
     scene, cfg: PlanningConfig, geom: VehicleGeometry, refine: bool, t0: float, snap: float
 ):
@@ -187,6 +209,8 @@ def _plan_in(
             first = (str(exc).splitlines() or [""])[0][:80]
             rr, refine_reason = None, f"refinement error ({type(exc).__name__}: {first})"
         refine_s = time.perf_counter() - t1
+        if rr is not None and snap > 0:
+            rr = _unsnap_kept(rr, res.trajectory, cfg)
         if rr is not None:
             refinement, refine_reason = rr.trajectory, str(rr.reason)
             if rr.ok and rr.trajectory.segments:

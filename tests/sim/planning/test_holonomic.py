@@ -43,7 +43,8 @@ def test_the_same_distances_as_scipy_on_the_planners_grids(monkeypatch, cell):
     for free, res, target in grids:
         assert free.size <= holonomic.PYTHON_DIJKSTRA_MAX_CELLS  # planned without SciPy
         ours = _both(free, res, target)  # bit for bit, inf where cut off
-        assert np.isfinite(ours).sum() > 0.5 * free.size
+        # a good part reachable (the region also covers cells outside the map and obstacles)
+        assert np.isfinite(ours).sum() > 0.25 * free.size
 
 
 def test_the_same_distances_as_scipy_on_random_masks():

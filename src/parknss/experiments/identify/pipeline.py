@@ -231,7 +231,8 @@ class Pipeline:
 
         root = store_dir(None)
         return self.book.run("nss", inputs, body, equivalent={
-            "code_version": lambda rec, now: root is not None and rec in accepted_versions(root, now),
+            "code_version": lambda rec, now: (root is not None
+                                              and rec in accepted_versions(root, now)),
             "config": lambda rec, now: _identity_of(rec) == now})
 
     def stage_selection(self) -> StageRecord:
