@@ -513,14 +513,15 @@ def _version() -> str:
         return "unknown"
 
 
-def _plain(value: Any) -> Any:
-    """``value`` as plain JSON for a manifest: paths resolved, tuples as lists."""
+def plain_json(value: Any) -> Any:
+    """``value`` as plain JSON (for a manifest or a digest): paths resolved, tuples as
+    lists, mappings with str keys."""
     if isinstance(value, Path):
         return str(value.expanduser().resolve())
     if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {str(k): plain_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [plain_json(v) for v in value]
     return value
 
 
@@ -669,7 +670,7 @@ def run_folder(
     """
     out = check_location(out)
     recover_stale(out)
-    plain = _plain(dict(args))
+    plain = plain_json(dict(args))
     digest = _digest(command, plain)
     held = describe_contents(out)
     stored = read_manifest(out)

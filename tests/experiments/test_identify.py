@@ -167,10 +167,11 @@ def test_nss_stage_kept_across_accepted_code_versions_and_record_formats(env, ca
     import shutil
 
     from parknss.config import REPO_ROOT
-    from parknss.experiments.identify.stages import digest_of, plain
+    from parknss.experiments.identify.stages import digest_of
     from parknss.experiments.lineage import accepted_versions
     from parknss.experiments.store import code_version, store_dir
     from parknss.nss.config import NSSConfig
+    from parknss.outputs import plain_json as plain
 
     store = tmp_path / "store"  # the checkout's lineage, read from a copy
     shutil.copytree(REPO_ROOT / "results" / "lineage", store / "lineage")

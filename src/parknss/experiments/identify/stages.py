@@ -33,25 +33,15 @@ from pathlib import Path
 from typing import Any
 
 from parknss import durable
-from parknss.outputs import write_text_atomic
+from parknss.outputs import plain_json, write_text_atomic
 
 Say = Callable[[str], None]
 
 
-def plain(value: Any) -> Any:
-    """``value`` as plain JSON: paths resolved, tuples as lists, mappings with str keys."""
-    if isinstance(value, Path):
-        return str(value.expanduser().resolve())
-    if isinstance(value, Mapping):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [plain(v) for v in value]
-    return value
-
-
 def digest_of(inputs: Mapping[str, Any]) -> str:
-    """The 16-hex digest of a stage's inputs (sorted-key JSON of :func:`plain`)."""
-    blob = json.dumps(plain(inputs), sort_keys=True, default=str).encode()
+    """The 16-hex digest of a stage's inputs (sorted-key JSON of
+    :func:`parknss.outputs.plain_json`)."""
+    blob = json.dumps(plain_json(inputs), sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
@@ -152,7 +142,7 @@ class StageBook:
         counts as the same, and the record keeps what it recorded."""
         n, i = len(self.order), self.order.index(stage) + 1
         head = f"stage {i}/{n} {stage}"
-        inputs = plain(dict(inputs))
+        inputs = plain_json(dict(inputs))
         digest = digest_of(inputs)
         old = self.read(stage)
         if old is not None and old.digest != digest and equivalent and _same_inputs(
@@ -186,7 +176,7 @@ class StageBook:
         rec.wall_s = time.perf_counter() - t0
         rec.wall_total_s += rec.wall_s
         rec.status, rec.finished_utc = "done", _now()
-        rec.product, rec.reused = plain(outcome.product), outcome.reused
+        rec.product, rec.reused = plain_json(outcome.product), outcome.reused
         self._write(rec)
         done = f"reused: {outcome.reused}" if outcome.reused else f"done in {fmt_s(rec.wall_s)}"
         self.say(f"{head}: {done}")
