@@ -6,9 +6,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from parknss.sim.planning.frame import CanonicalFrame, CanonicalScene
+from parknss.sim.planning.frame import CanonicalFrame, CanonicalScene, move_scene
 from parknss.sim.planning.hybrid_astar import HybridAStar, PlanningConfig
-from parknss.sim.scenarios import Obstacle, Scene, grid_scene
+from parknss.sim.scenarios import Scene, grid_scene
 from parknss.vehicle import VehicleGeometry
 
 G = VehicleGeometry()
@@ -17,36 +17,9 @@ PLANNER = HybridAStar(PlanningConfig(time_budget_s=30.0, canonical_frame=True), 
 
 def moved(scene: Scene, angle: float, shift, mirror: bool) -> Scene:
     """``scene`` mirrored in y (first, when ``mirror``), rotated by ``angle`` rad about the
-    origin and shifted; the map is the bounding box of the moved map."""
-    m = -1.0 if mirror else 1.0
-    c, s = math.cos(angle), math.sin(angle)
-
-    def xy(p):
-        p = np.asarray(p, dtype=float)
-        x, y = p[..., 0], m * p[..., 1]
-        return np.stack([c * x - s * y + shift[0], s * x + c * y + shift[1]], axis=-1)
-
-    def pose(p):
-        q = xy(p[:2])
-        return (float(q[0]), float(q[1]), angle + m * float(p[2]))
-
-    def poly(v):
-        q = xy(v)
-        return q[::-1].copy() if mirror else q
-
-    xmin, ymin, xmax, ymax = scene.bounds
-    box = xy(np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]]))
-    obstacles = tuple(
-        Obstacle(o.kind, poly(o.vertices), tuple(poly(p) for p in o.parts))
-        for o in scene.obstacles
-    )
-    return replace(
-        scene,
-        bounds=(*box.min(axis=0), *box.max(axis=0)),
-        obstacles=obstacles,
-        start=pose(scene.start),
-        goal=pose(scene.goal),
-    )
+    origin and shifted; the map is the bounding box of the moved map (a world-axis box
+    that changes size with the rotation, unlike the outline ``move_scene`` also keeps)."""
+    return replace(move_scene(scene, angle, shift, mirror), map_outline=None)
 
 
 def test_frame_round_trip_and_handedness():
