@@ -21,16 +21,13 @@
 
 from __future__ import annotations
 
-import fnmatch
-import hashlib
-import subprocess
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 from parknss.config import CONFIG_DIR, REPO_ROOT, read_json
 from parknss.errors import ConfigError, ParknssError
 from parknss.experiments.lineage import accepted_versions
-from parknss.experiments.store import CODE_EXCLUDED, CODE_FILES, code_tokens, code_version
+from parknss.experiments.store import code_version, revision_code_version
 
 PAPER_INERT = ("fast.",)
 """Config fields a paper-recipe fit never reads (the fast recipe's section)."""
@@ -70,39 +67,6 @@ def config_mismatch(recorded: dict, wanted: dict) -> str | None:
     return None
 
 
-def _git(*args: str) -> str | None:
-    try:
-        res = subprocess.run(["git", "-C", str(REPO_ROOT), *args], capture_output=True,
-                             text=True, timeout=60, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return res.stdout if res.returncode == 0 else None
-
-
-def code_version_at(revision: str) -> str | None:
-    """:func:`~parknss.experiments.store.code_version` of the code at git ``revision`` of
-    this checkout, or None (no checkout, no git, unknown revision)."""
-    listing = _git("ls-tree", "-r", "--name-only", revision, "src/parknss")
-    if listing is None:
-        return None
-    rels = []
-    for name in listing.split():
-        rel = name.removeprefix("src/parknss/")
-        if rel in CODE_EXCLUDED:
-            continue
-        if any(fnmatch.fnmatch(rel, pat) and rel.count("/") == pat.count("/")
-               for pat in CODE_FILES):
-            rels.append(PurePosixPath(rel))
-    h = hashlib.sha256()
-    for rel in sorted(rels):
-        text = _git("show", f"{revision}:src/parknss/{rel}")
-        if text is None:
-            return None
-        h.update(rel.as_posix().encode() + b"\0")
-        h.update(code_tokens(text) + b"\0")
-    return h.hexdigest()[:16]
-
-
 @dataclass(frozen=True)
 class NssCheck:
     """The verdict on a given NSS: ``reason`` is the one line the log and the card show;
@@ -138,7 +102,7 @@ def check_nss(folder: Path, data_hash: str, wanted: dict, *, allow_code_change: 
     fitted = training.get("code_version")
     rev = training.get("git_revision")
     if fitted is None and rev:
-        fitted = code_version_at(str(rev))
+        fitted = revision_code_version(str(rev))
     if fitted == current:
         code = "current"
     elif fitted is not None and store_root is not None and fitted in accepted_versions(
