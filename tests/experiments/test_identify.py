@@ -96,6 +96,27 @@ def test_rerun_skips_finished_stages(env, car, capsys):
     assert before == after
 
 
+def test_rerun_from_another_working_folder_skips_every_stage(env, tmp_path, monkeypatch,
+                                                               capsys):
+    """Relative --data/--out spelled from two working folders name the same run: the
+    records hold absolute paths, so the second run finds the campaign and skips."""
+    sets = [x for s in NSS_SET for x in ("--set", s)]
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    data = os.path.relpath(env / "data", work)
+    act = os.path.relpath(env / "act.yaml", work)
+    monkeypatch.chdir(work)
+    rest = ["--stages", STAGES, *sets, "--json"]
+    assert main(["identify", "--actuator-config", act, "--data", data, "--out", "car",
+                 *rest]) == 0
+    capsys.readouterr()
+    monkeypatch.chdir(tmp_path)
+    assert main(["identify", "--actuator-config", os.path.join("a", "b", act),
+                 "--data", os.path.join("a", "b", data), "--out", "a/b/car", *rest]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert {doc["stages"][s]["action"] for s in STAGES.split(",") if s != "card"} == {"skipped"}
+
+
 def test_changed_input_reruns_that_stage_and_later_ones(env, car, tmp_path, capsys):
     import shutil
 

@@ -84,7 +84,8 @@ class Pipeline:
 
     def __init__(self, inputs: IdentifyInputs, cfg: IdentifyConfig, say: Say) -> None:
         self.inp, self.cfg, self.say = inputs, cfg, say
-        self.car = Path(inputs.out)
+        # absolute, so that the stage records name the same files from any working folder
+        self.car = Path(inputs.out).resolve()
         self.recipe = inputs.recipe or cfg.recipe
         if self.recipe not in RECIPES:
             raise ConfigError(f"--recipe {self.recipe!r}: one of {', '.join(RECIPES)}")
@@ -158,7 +159,7 @@ class Pipeline:
             given = read_campaign(inp.data)
             refuse_early(given, f"parknss identify --data {inp.data}")  # before any work
             inputs = {"data": given.data_hash()}
-        target = self.car / "data" if inp.logs is not None else Path(inp.data)
+        target = self.car / "data" if inp.logs is not None else Path(inp.data).resolve()
 
         def body(fresh: bool) -> StageOutcome:
             if inp.logs is not None:
@@ -199,7 +200,7 @@ class Pipeline:
         cfg = self.nss_config()
         wanted = cfg.model_dump(mode="json")
         data_hash = self.rec["data"].product["facts"]["data_hash"]
-        given = self.inp.nss
+        given = None if self.inp.nss is None else str(Path(self.inp.nss).resolve())
         # the fields that decide the fit's numbers (a new option at its default, which
         # keeps the old behaviour, is not a change), and the training-code version
         inputs = {"data_hash": data_hash, "config": fit_identity(cfg),
