@@ -12,6 +12,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 HEAVY = ("torch", "scipy", "matplotlib", "casadi", "pandas", "pyarrow", "fastapi",
          "uvicorn", "onnxruntime", "ray", "numpy", "gymnasium", "safetensors")
@@ -80,9 +81,13 @@ def test_the_iso_module_imports_no_scipy():
     assert report == []
 
 
+RESULTS = Path(__file__).resolve().parents[2] / "results"
+
 LIGHT_COMMANDS = {
     # a command that runs (not only its --help) -> the heavy modules it may import
     "--version": (),
+    # the store's listing reads JSON; parked training states are checked without torch
+    "results list --json --store {results}": (),
     # planning needs CasADi, the figure matplotlib (not pyplot); a scene's heuristic grid
     # is small enough for the plain-Python Dijkstra, the closed-loop configs need no
     # scipy.linalg: no SciPy at all
@@ -107,7 +112,8 @@ print(json.dumps([code, sorted(names & heavy)]), file=sys.stderr)
 
 def test_light_commands_import_only_what_they_use(tmp_path):
     for command, allowed in LIGHT_COMMANDS.items():
-        code, loaded = _probe(_RUN, json.dumps(HEAVY), command.format(tmp=tmp_path))
+        line = command.format(tmp=tmp_path, results=RESULTS)
+        code, loaded = _probe(_RUN, json.dumps(HEAVY), line)
         assert code in (0, None), (command, code)
         extra = sorted(set(loaded) - set(allowed))
         assert extra == [], f"`parknss {command}` imported {extra}"

@@ -43,9 +43,8 @@ from typing import Any
 
 from parknss import durable
 from parknss.errors import CheckpointError
-from parknss.nss import train_state
-from parknss.nss.checkpoint import atomic_write_text, sha256_file
-from parknss.nss.train_state import FORMAT, META
+from parknss.nss import state_files as train_state
+from parknss.nss.state_files import FORMAT, META
 
 INFLIGHT = "inflight"
 """The store's folder of parked states: ``<store>/inflight/<store key>/``."""
@@ -83,7 +82,8 @@ def label(folder: str | Path, fn: str, kwargs: Mapping[str, Any], name: str, key
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     doc = {"fn": fn, "kwargs": dict(kwargs), "name": name, "key": key}
-    atomic_write_text(folder / JOB_FILE, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+    durable.write_bytes(folder / JOB_FILE,
+                        (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
 
 
 def read_step(folder: Path) -> int | None:
@@ -118,7 +118,7 @@ def read_info(folder: Path) -> StateInfo:
         raise CheckpointError(f"{folder}: no training state written yet") from exc
     except (OSError, ValueError, KeyError, TypeError, AttributeError, CheckpointError) as exc:
         raise CheckpointError(f"{folder / META}: unreadable ({exc})") from exc
-    if not tensors.is_file() or sha256_file(tensors) != sha:
+    if not tensors.is_file() or durable.sha256_file(tensors) != sha:
         raise CheckpointError(f"{tensors}: missing or does not match its {META} (torn)")
     return StateInfo(folder, key, fn, name or key, step, cpu, wall)
 
@@ -215,7 +215,8 @@ def add_sitting(folder: str | Path, sitting: dict) -> None:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rows = [*read_sittings(folder), {**sitting, "from_step": read_step(folder) or 0}]
-    atomic_write_text(folder / SITTINGS, json.dumps(rows, indent=1, sort_keys=True) + "\n")
+    durable.write_bytes(folder / SITTINGS,
+                        (json.dumps(rows, indent=1, sort_keys=True) + "\n").encode())
 
 
 def unpark(root: Path, key: str) -> bool:

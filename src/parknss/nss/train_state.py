@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,13 +37,16 @@ from parknss.errors import CheckpointError
 from parknss.nss.config import NSSConfig, fit_identity
 from parknss.nss.history import History
 from parknss.nss.model import NSSModel
-
-FORMAT = "parknss-nss-train-state/1"
-TENSORS = "train_state.safetensors"
-"""The tensor file of a state written before generations (a JSON without ``tensors``)."""
-META = "train_state.json"
-PREV_META = "train_state.prev.json"
-"""The JSON of the generation before the newest, kept until the next commit."""
+from parknss.nss.state_files import (  # noqa: F401 (the layout, re-exported)
+    FORMAT,
+    META,
+    PREV_META,
+    TENSORS,
+    commit,
+    exists,
+    tensors_name,
+    tensors_path,
+)
 
 
 def fingerprint(
@@ -59,28 +61,6 @@ def fingerprint(
         sort_keys=True,
     ).encode()
     return hashlib.sha256(blob).hexdigest()
-
-
-def exists(folder: Path) -> bool:
-    return (Path(folder) / META).is_file() or (Path(folder) / PREV_META).is_file()
-
-
-def tensors_name(meta: dict) -> str:
-    """The tensor file a state JSON names (:data:`TENSORS` for a state written before
-    generations); a :class:`CheckpointError` for a name that is not a plain file name."""
-    name = meta.get("tensors", TENSORS)
-    plain = isinstance(name, str) and "/" not in name and "\\" not in name
-    if not (plain and name.startswith("train_state.") and name.endswith(".safetensors")):
-        raise CheckpointError(f"training state names an invalid tensor file {name!r}")
-    return name
-
-
-def tensors_path(folder: Path) -> Path | None:
-    """The tensor file of the newest state in ``folder`` (None: no readable JSON)."""
-    try:
-        return Path(folder) / tensors_name(json.loads((Path(folder) / META).read_text()))
-    except (OSError, ValueError, CheckpointError, AttributeError):
-        return None
 
 
 @dataclass
@@ -133,35 +113,6 @@ def save(
         "sha256": sha,
     }
     commit(folder, json.dumps(meta).encode())
-
-
-def commit(folder: Path, meta: bytes, keep_previous: bool = True) -> None:
-    """Make ``meta`` (a state JSON whose tensor file is already in ``folder``, durably) the
-    newest generation: keep the JSON in place as :data:`PREV_META`, rename the new one over
-    :data:`META`, then delete the tensor files neither names (see the module doc).
-    ``keep_previous=False`` (a parked copy, committed to git): drop the previous
-    generation once the new one is in place."""
-    folder = Path(folder)
-    cur = folder / META
-    if cur.is_file():
-        durable.write_bytes(folder / PREV_META, cur.read_bytes())
-        durable.crash_point("train_state.prev")
-    durable.write_bytes(cur, meta, crash="train_state.meta_tmp")
-    durable.crash_point("train_state.meta")
-    if not keep_previous:
-        (folder / PREV_META).unlink(missing_ok=True)
-    keep = set()
-    for name in (META, PREV_META):
-        try:
-            keep.add(tensors_name(json.loads((folder / name).read_text())))
-        except (OSError, ValueError, CheckpointError, AttributeError):
-            continue
-    for p in folder.glob("train_state*.safetensors"):
-        if p.name not in keep:
-            p.unlink(missing_ok=True)
-    for p in folder.glob(".train_state*.tmp-*"):  # a killed writer's temporary file
-        if not p.name.endswith(f".tmp-{os.getpid()}"):
-            p.unlink(missing_ok=True)
 
 
 def _read(folder: Path, src: Path, fp: str) -> tuple[dict, dict[str, torch.Tensor]]:
