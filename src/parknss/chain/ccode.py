@@ -302,18 +302,30 @@ static inline pk_vec pk_exp_v(pk_vec y) {
    rational approximation of Cephes' tanh; else 1 - 2/(e^{2|x|} + 1) with 2|x| capped at
    40 (tanh is 1 to double precision from |x| = 19.1); the sign of x copied last (odd,
    -0 kept, NaN passed). */
-static inline pk_vec pk_tanh_v(pk_vec x) {
-    const pk_ivec sgn = PK_ISPLAT(-0x7fffffffffffffffLL - 1);  /* the sign bit */
-    pk_ivec xi = (pk_ivec)x;
-    pk_vec a = (pk_vec)(xi & ~sgn), z = a * a;
+static inline pk_vec pk_tanh_small(pk_vec a, pk_vec z) {
     pk_vec num = (z * -9.64399179425052238628e-1 - 9.92877231001918586564e1) * z
                  - 1.61468768441708447952e3;
     pk_vec den = ((z + 1.12811678491632931402e2) * z + 2.23548839060100448583e3) * z
                  + 4.84406305325125486048e3;
-    pk_vec small = a + a * z * (num / den);
+    return a + a * z * (num / den);
+}
+
+static inline pk_vec pk_tanh_big(pk_vec a) {
     pk_vec y = PK_SELECT((pk_ivec)(a > PK_SPLAT(20.0)), PK_SPLAT(40.0), a * 2.0);
-    pk_vec big = 1.0 - 2.0 / (pk_exp_v(y) + 1.0);
-    pk_vec r = PK_SELECT((pk_ivec)(a < PK_SPLAT(0.625)), small, big);
+    return 1.0 - 2.0 / (pk_exp_v(y) + 1.0);
+}
+
+/* (a vector whose lanes all take one branch computes that branch only: same bits) */
+static inline pk_vec pk_tanh_v(pk_vec x) {
+    const pk_ivec sgn = PK_ISPLAT(-0x7fffffffffffffffLL - 1);  /* the sign bit */
+    pk_ivec xi = (pk_ivec)x;
+    pk_vec a = (pk_vec)(xi & ~sgn), z = a * a, r;
+    pk_ivec m = (pk_ivec)(a < PK_SPLAT(0.625));
+    long long any = 0, all = -1;
+    for (int k = 0; k < PK_VW; ++k) { any |= m[k]; all &= m[k]; }
+    if (all) r = pk_tanh_small(a, z);
+    else if (!any) r = pk_tanh_big(a);
+    else r = PK_SELECT(m, pk_tanh_small(a, z), pk_tanh_big(a));
     return (pk_vec)((pk_ivec)r | (xi & sgn));
 }
 
