@@ -3,12 +3,16 @@
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_chain.py [CHAIN] [--steps N] [--json]
 
 Replays the longest logged command stream of the default campaign and reports, for each
-implementation, the median time per 10 ms step and the real-time factor 10 ms / step:
+implementation, the median time per 10 ms step (of 7 repeats, 3 or 2 for the slow ones)
+and the real-time factor 10 ms / step, both in wall time (what a user waits for) and in
+this thread's CPU time (what the step costs, less inflated on a loaded machine):
 
 * ``c_fmu``: the generated C step inside the FMU's binary (``pk_run`` of
   binaries/linux64/parknss_chain.so over the whole stream, one call; portable SSE2 build);
 * ``c_native``: the same C built for this machine (``NativeChain.run``, ``-march=native``,
   bit-identical results);
+* ``c_native_many``: 16 chains stepped together by the C ``pk_step_many`` of that build
+  (one ctypes call a sample, prepared arguments), time per chain-step;
 * ``fmi2_dostep``: the same FMU through FMPy's FMI 2.0 ``doStep`` (10 ms), one call a step;
 * ``python_native``: ``DeployedChain.step`` (the Plant protocol) with the generated C
   through ctypes (``engine="native"``);
@@ -18,6 +22,9 @@ implementation, the median time per 10 ms step and the real-time factor 10 ms / 
   implementation, the default engine);
 * ``onnxruntime``: the ONNX step graph (``parknss export onnx``), one session run a step;
 * ``pytorch``: the chain's torch rollout (``Chain.rollout``, one trial, per sample).
+
+It also prints the largest difference, per output, between the native C and the NumPy
+twin over the replay (the tests hold 1e-9).
 """
 
 from __future__ import annotations
@@ -33,19 +40,27 @@ from pathlib import Path
 
 import numpy as np
 
+from parknss.chain.ccode import OUTPUTS
 from parknss.config import SHIPPED_CHAIN
 from parknss.plant import Commands
 
 CMDS = ("gear", "torque_cmd", "decel_cmd", "steer_cmd")
 
 
-def _per_step(fn, n: int, repeats: int = 5) -> float:
-    """Median over ``repeats`` of the time of fn() divided by n, in µs."""
-    ts = []
+CPU: dict[str, float] = {}  # µs per step in this thread's CPU time, by name
+
+
+def _per_step(fn, n: int, repeats: int = 7, name: str | None = None) -> float:
+    """Median over ``repeats`` of the wall time of fn() divided by n, in µs (the median CPU
+    time of this thread in ``CPU[name]``)."""
+    ts, cs = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.thread_time(), time.perf_counter()
         fn()
         ts.append((time.perf_counter() - t0) / n)
+        cs.append((time.thread_time() - c0) / n)
+    if name:
+        CPU[name] = float(np.median(cs) * 1e6)
     return float(np.median(ts) * 1e6)
 
 
@@ -87,7 +102,7 @@ def main() -> None:
             lib.pk_start(state, *args)
             lib.pk_run(state, c.ctypes.data_as(dp), ctypes.c_long(n), out.ctypes.data_as(dp))
 
-        res["c_fmu"] = _per_step(c_run, n)
+        res["c_fmu"] = _per_step(c_run, n, name="c_fmu")
 
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave
@@ -109,7 +124,7 @@ def main() -> None:
                 slave.setReal([1, 2, 3], reals[k])
                 slave.doStep(currentCommunicationPoint=k * 0.01, communicationStepSize=0.01)
 
-        res["fmi2_dostep"] = _per_step(fmi_run, n, repeats=3)
+        res["fmi2_dostep"] = _per_step(fmi_run, n, repeats=3, name="fmi2_dostep")
         slave.terminate()
         slave.freeInstance()
 
@@ -119,13 +134,27 @@ def main() -> None:
             nat.start(x0, y0, cm[0])
             nat.run(cm)
 
-        res["c_native"] = _per_step(native_run, n)
+        res["c_native"] = _per_step(native_run, n, name="c_native")
+        nat.start(x0, y0, cm[0])
+        agree = np.max(np.abs(nat.run(cm) - _twin_replay(a.chain, cm, x0, y0)), axis=0)
 
         from parknss.chain.deployed import step_many
 
         k_many = 16
         many = [load_chain(a.chain, engine="native") for _ in range(k_many)]
         m_many = min(n, 500)
+        cm_many = [np.ascontiguousarray(np.broadcast_to(r, (k_many, 4))) for r in cm[:m_many]]
+        states = (ctypes.c_void_p * k_many)(*[p.stepper._addr for p in many])
+        out_many = np.empty((k_many, 8))
+        c_many = many[0].stepper._lib.pk_step_many
+
+        def c_many_run():
+            for p in many:
+                p.reset()
+            for r in cm_many:
+                c_many(states, k_many, r.ctypes.data, out_many.ctypes.data)
+
+        res["c_native_many"] = _per_step(c_many_run, m_many * k_many, name="c_native_many")
 
         def many_run():
             for p in many:
@@ -133,7 +162,8 @@ def main() -> None:
             for cmd in cmds[:m_many]:
                 step_many(many, [cmd] * k_many)
 
-        res["python_native_many"] = _per_step(many_run, m_many * k_many, repeats=3)
+        res["python_native_many"] = _per_step(many_run, m_many * k_many,
+                                              name="python_native_many")
 
         for engine in ("native", "numpy"):
             dep = load_chain(a.chain, engine=engine)
@@ -143,7 +173,8 @@ def main() -> None:
                 for cmd in cmds:
                     dep.step(cmd)
 
-            res[f"python_{engine}"] = _per_step(plant_run, n, repeats=3)
+            res[f"python_{engine}"] = _per_step(plant_run, n, 7 if engine == "native" else 3,
+                                                name=f"python_{engine}")
 
         import onnxruntime as ort
 
@@ -161,25 +192,49 @@ def main() -> None:
             for k in range(m):
                 s, _ = sess.run(None, {"state": s, "command": c32[k]})
 
-        res["onnxruntime"] = _per_step(ort_run, m, repeats=3)
+        res["onnxruntime"] = _per_step(ort_run, m, repeats=3, name="onnxruntime")
 
         from parknss.chain.trials import rollout_trials
 
         sub = tr.__class__(tr.id, tr.maneuver, tr.repetition,
                            {k: np.asarray(v)[:m] for k, v in tr.channels.items()})
-        res["pytorch"] = _per_step(lambda: rollout_trials(dep.chain, [sub]), m, repeats=2)
+        res["pytorch"] = _per_step(lambda: rollout_trials(dep.chain, [sub]), m, repeats=2,
+                                   name="pytorch")
 
     doc = {"chain": a.chain, "steps": n, "us_per_step": res,
            "real_time_factor": {k: 1e4 / v for k, v in res.items()},
+           "cpu_us_per_step": CPU,
+           "cpu_real_time_factor": {k: 1e4 / v for k, v in CPU.items()},
+           "native_vs_numpy_max_abs": dict(zip(OUTPUTS, agree.tolist(), strict=True)),
+           "load_average": os.getloadavg()[0],
            "specs": load_chain(a.chain).chain.specs()}
     if a.json:
         print(json.dumps(doc, indent=2))
         return
-    print(f"one run, {n} steps; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print(f"one run, {n} steps; load average {doc['load_average']:.1f} on {os.cpu_count()} "
+          "cores; wall and CPU time per 10 ms step")
+    print(f"{'':19s} {'wall µs':>9s} {'x real':>7s} {'CPU µs':>9s} {'x real':>7s} "
+          f"{'/ FMU C':>8s} {'/ native C':>10s}  (ratios of CPU times)")
     for k, v in res.items():
-        print(f"{k:19s} {v:9.2f} µs/step   {1e4 / v:9.0f}x real time   "
-              f"{v / res['c_fmu']:6.2f}x the FMU's C step")
+        c = CPU[k]
+        print(f"{k:19s} {v:9.2f} {1e4 / v:7.0f} {c:9.2f} {1e4 / c:7.0f} "
+              f"{c / CPU['c_fmu']:8.2f} {c / CPU['c_native']:10.2f}")
+    print("native C vs NumPy twin, largest difference: "
+          + ", ".join(f"{k} {v:.1e}" for k, v in doc["native_vs_numpy_max_abs"].items()))
     print(f"chain {a.chain}: {doc['specs']}")
+
+
+def _twin_replay(chain: str, cm: np.ndarray, x0, y0) -> np.ndarray:
+    """The NumPy twin's (T, 8) outputs under the commands cm from (x0, y0)."""
+    from parknss.chain import load_chain
+
+    rt = load_chain(chain).rt
+    rt.start(x0, y0, cm[0])
+    rows = []
+    for c in cm:
+        act, st = rt.step(*c)
+        rows.append([*act, *st, rt.gear])
+    return np.array(rows)
 
 
 if __name__ == "__main__":

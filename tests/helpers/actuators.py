@@ -49,10 +49,12 @@ def tiny_campaign(n: int = 240, reps: int = 2) -> Campaign:
     return Campaign(trials, name="tiny")
 
 
-def tiny_nss(campaign: Campaign, seed: int = 0, dtype=torch.float32):
+def tiny_nss(campaign: Campaign, seed: int = 0, dtype=torch.float32, state_units: int = 16,
+             output_units: int = 8):
     """A small random NSS fitted to nothing (the chain's arithmetic is what is tested)."""
-    cfg = with_overrides(NSSConfig(), model={"state_units": 16, "state_layers": 2,
-                                             "output_units": 8, "output_layers": 1},
+    cfg = with_overrides(NSSConfig(), model={"state_units": state_units, "state_layers": 2,
+                                             "output_units": output_units,
+                                             "output_layers": 1},
                          train={"seed": seed})
     norm = Normalizer.fit(list(campaign), NORMALIZED, cfg.data.normalizer,
                           cfg.data.clip_percentiles)

@@ -8,9 +8,15 @@ the doubles round-trip exactly), and the twin's arithmetic statement for stateme
 input envelope (NaN hold, ±inf and domain clamps), the gear rule
 (:mod:`parknss.actuators.shift`), the three steppers (static, lag1, Hammerstein, lag2,
 NARX, GRU, LSTM; state-aware features), the output envelope (floors, steering rate limit,
-lock) and the NSS's Euler step and readout. Only the order of the sums inside a
-matrix-vector product differs from NumPy's BLAS, so the two agree to rounding over whole
-trials (tests/chain/test_ccode.py; the FMU test holds it at 1e-9).
+lock) and the NSS's Euler step and readout. Two things differ from NumPy: the order of the
+sums inside a matrix-vector product (NumPy's BLAS), and ``tanh``, which the C computes
+from IEEE basic operations only (``pk_tanh_v``: Cephes' rational form below 0.625, else
+1 - 2/(e^{2|x|} + 1) with its own e^y; within 1.4 ulp of the exact value (1.34 measured,
+just above 0.625), where glibc's is within 2 ulp and NumPy's SIMD one 1.2, and those two
+differ from each other in a third of the arguments), vectorised and free of libm, so it
+has the same bits on every machine and in every build. The two agree to rounding over
+whole trials (shipped chain, longest bundled trial: 2.1e-14 against 1.4e-14 with libm's
+tanh; tests/chain/test_ccode.py and the FMU test hold 1e-9).
 
 The C interface (``pk_chain.h``)::
 
@@ -20,15 +26,18 @@ The C interface (``pk_chain.h``)::
     void pk_run(pk_chain *s, const double *cmds, long n, double *out);   n samples
     void pk_step_many(pk_chain *const *s, long n, const double *cmds, double *out);
                                                   one sample of n chains, cmds (n, 4)
+    void pk_tanh_array(long n, const double *x, double *y);   the step's tanh, for checks
 
 ``cmd`` is [gear, torque_cmd N·m, decel_cmd m/s², steer_cmd deg]; ``out`` is
 [torque N·m, brake_pressure bar, steer deg, vx m/s, yaw_rate rad/s, ax m/s², ay m/s²,
 engaged gear] (:data:`OUTPUTS`); ``pk_start`` is :meth:`RealtimeChain.start`.
 Matrix-vector products loop over the input outer and the output inner, with the weights
-stored transposed, so the compiler vectorises them without reassociating a sum; blocks of
-outputs are summed in registers. ``pk_step_many`` steps several chains of the same weights
-(a grid's or a vector environment's plants) with each NSS layer applied to all of them
-before the next, so its weights are read once per batch; per chain it is ``pk_step``.
+stored transposed, so each output is summed over the input in order (never reassociated);
+blocks of outputs are summed in vector registers (GCC/Clang vector extensions: 64-byte
+vectors for AVX-512, 32 for AVX, else 16), so every build gives the plain loop's bits.
+``pk_step_many`` steps several chains of the same weights (a grid's or a vector
+environment's plants) with each NSS layer applied to all of them before the next, two
+chains summed against each weight load; per chain it is ``pk_step`` bit for bit.
 """
 
 from __future__ import annotations
@@ -209,16 +218,16 @@ def _stepper(ch: str, st: Stepper, feats: tuple[str, ...], w: _Writer) -> tuple[
                     f"        for (int q = 0; q < 4; ++q)\n"
                     f"            gj[q] = gi[q * {H} + j] + gh[q * {H} + j];\n"
                     "        double ig = pk_sigmoid(gj[0]), fg = pk_sigmoid(gj[1]);\n"
-                    "        double gg = tanh(gj[2]), og = pk_sigmoid(gj[3]);\n"
+                    "        double gg = pk_tanh(gj[2]), og = pk_sigmoid(gj[3]);\n"
                     f"        s->{ch}.c[j] = fg * s->{ch}.c[j] + ig * gg;\n"
-                    f"        s->{ch}.h[j] = og * tanh(s->{ch}.c[j]);\n    }}\n")
+                    f"        s->{ch}.h[j] = og * pk_tanh(s->{ch}.c[j]);\n    }}\n")
             reset = (f"    for (int j = 0; j < {H}; ++j) s->{ch}.h[j] = s->{ch}.c[j] = 0.0;\n"
                      "    (void)y0;\n")
         else:
             body = (f"    for (int j = 0; j < {H}; ++j) {{\n"
                     f"        double r = pk_sigmoid(gi[j] + gh[j]);\n"
                     f"        double z = pk_sigmoid(gi[{H} + j] + gh[{H} + j]);\n"
-                    f"        double n = tanh(gi[{2 * H} + j] + r * gh[{2 * H} + j]);\n"
+                    f"        double n = pk_tanh(gi[{2 * H} + j] + r * gh[{2 * H} + j]);\n"
                     f"        s->{ch}.h[j] = (1.0 - z) * n + z * s->{ch}.h[j];\n    }}\n")
             reset = f"    for (int j = 0; j < {H}; ++j) s->{ch}.h[j] = 0.0;\n    (void)y0;\n"
         tail = (f"    for (int j = 0; j < {H}; ++j) y += {wo}[j] * s->{ch}.h[j];\n"
@@ -242,39 +251,159 @@ def _state_struct(rt: RealtimeChain) -> str:
 
 
 _RUNTIME = r"""
+/* ---------------------------------------------------------------- vector arithmetic
+   GCC/Clang vector extensions: 64-byte vectors when the build targets AVX-512, 32 with
+   AVX, else 16 (SSE2, NEON). Only IEEE basic operations (+ - * /, comparisons, bit
+   masks), never contracted (C99) nor reassociated, so every build gives the same bits. */
+#if defined(__AVX512F__)
+#define PK_VB 64
+#elif defined(__AVX__)
+#define PK_VB 32
+#else
+#define PK_VB 16
+#endif
+#define PK_VW (PK_VB / 8)
+typedef double pk_vec __attribute__((vector_size(PK_VB), aligned(8)));
+typedef long long pk_ivec __attribute__((vector_size(PK_VB), aligned(8)));
+#define PK_SPLAT(v) ((pk_vec){0} + (v))
+#define PK_ISPLAT(v) ((pk_ivec){0} + (v))
+#define PK_SELECT(m, a, b) ((pk_vec)(((m) & (pk_ivec)(a)) | (~(m) & (pk_ivec)(b))))
+
+/* e^y for 0 <= y <= 40 (or NaN): y = n ln2 + r, |r| <= ln2/2 (Cody-Waite, ln2 in two
+   parts), e^r by its Taylor series to r^13 (truncation < 1e-17 relative), 2^n by the
+   exponent bits. */
+static inline pk_vec pk_exp_v(pk_vec y) {
+    const double shift = 6755399441055744.0;  /* 1.5 * 2^52: t - shift rounds to n */
+    pk_vec t = y * 1.4426950408889634 + shift;
+    pk_vec n = t - shift;
+    pk_vec r = y - n * 6.93147180369123816490e-01;
+    r = r - n * 1.90821492927058770002e-10;
+    pk_vec p = PK_SPLAT(1.0 / 6227020800.0);
+    p = p * r + 1.0 / 479001600.0;
+    p = p * r + 1.0 / 39916800.0;
+    p = p * r + 1.0 / 3628800.0;
+    p = p * r + 1.0 / 362880.0;
+    p = p * r + 1.0 / 40320.0;
+    p = p * r + 1.0 / 5040.0;
+    p = p * r + 1.0 / 720.0;
+    p = p * r + 1.0 / 120.0;
+    p = p * r + 1.0 / 24.0;
+    p = p * r + 1.0 / 6.0;
+    p = p * r + 0.5;
+    p = p * r + 1.0;
+    p = p * r + 1.0;
+    pk_ivec e = ((pk_ivec)t - 0x4338000000000000LL + 1023) << 52;
+    return p * (pk_vec)e;
+}
+
+/* tanh from basic operations only (no libm: the same bits on every machine and build),
+   within 1.4 ulp of the exact value (glibc's within 2, NumPy's SIMD one 1.2; the three
+   differ in the last bit or two). |x| < 0.625: x + x·z·P(z)/Q(z), z = x², the
+   rational approximation of Cephes' tanh; else 1 - 2/(e^{2|x|} + 1) with 2|x| capped at
+   40 (tanh is 1 to double precision from |x| = 19.1); the sign of x copied last (odd,
+   -0 kept, NaN passed). */
+static inline pk_vec pk_tanh_small(pk_vec a, pk_vec z) {
+    pk_vec num = (z * -9.64399179425052238628e-1 - 9.92877231001918586564e1) * z
+                 - 1.61468768441708447952e3;
+    pk_vec den = ((z + 1.12811678491632931402e2) * z + 2.23548839060100448583e3) * z
+                 + 4.84406305325125486048e3;
+    return a + a * z * (num / den);
+}
+
+static inline pk_vec pk_tanh_big(pk_vec a) {
+    pk_vec y = PK_SELECT((pk_ivec)(a > PK_SPLAT(20.0)), PK_SPLAT(40.0), a * 2.0);
+    return 1.0 - 2.0 / (pk_exp_v(y) + 1.0);
+}
+
+/* (a vector whose lanes all take one branch computes that branch only: same bits) */
+static inline pk_vec pk_tanh_v(pk_vec x) {
+    const pk_ivec sgn = PK_ISPLAT(-0x7fffffffffffffffLL - 1);  /* the sign bit */
+    pk_ivec xi = (pk_ivec)x;
+    pk_vec a = (pk_vec)(xi & ~sgn), z = a * a, r;
+    pk_ivec m = (pk_ivec)(a < PK_SPLAT(0.625));
+    long long any = 0, all = -1;
+    for (int k = 0; k < PK_VW; ++k) { any |= m[k]; all &= m[k]; }
+    if (all) r = pk_tanh_small(a, z);
+    else if (!any) r = pk_tanh_big(a);
+    else r = PK_SELECT(m, pk_tanh_small(a, z), pk_tanh_big(a));
+    return (pk_vec)((pk_ivec)r | (xi & sgn));
+}
+
+/* y[0:n] = tanh(y[0:n]), whole vectors then a zero-padded last one (same lanes' bits) */
+static void pk_tanh_n(double *y, int n) {
+    int j = 0;
+    for (; j + PK_VW <= n; j += PK_VW) *(pk_vec *)(y + j) = pk_tanh_v(*(const pk_vec *)(y + j));
+    if (j < n) {
+        pk_vec t = {0};
+        for (int k = 0; j + k < n; ++k) t[k] = y[j + k];
+        t = pk_tanh_v(t);
+        for (int k = 0; j + k < n; ++k) y[j + k] = t[k];
+    }
+}
+
+static double pk_tanh(double x) { pk_vec t = {0}; t[0] = x; return pk_tanh_v(t)[0]; }
 static double pk_sigmoid(double x) { return 1.0 / (1.0 + exp(-x)); }
 
-/* y (n_out) = W x with W stored transposed (n_in, n_out); the sum over the input in
-   order, the output loop inner (no sum is reassociated). Blocks of PK_BLK outputs are
-   summed in vector registers (GCC/Clang vector extensions: AVX when the build targets
-   it, else SSE2) over the whole input before they are stored: per output the same
-   additions in the same order as the plain loop, without reloading y for every input. */
-#define PK_BLK 16
-#if defined(__AVX__)
-typedef double pk_vec __attribute__((vector_size(32), aligned(8)));
-#define PK_VW 4
-#else
-typedef double pk_vec __attribute__((vector_size(16), aligned(8)));
-#define PK_VW 2
-#endif
-static void pk_matvec(const double *wt, int n_in, int n_out, const double *x, double *y) {
-    int j0 = 0;
-    for (; j0 + PK_BLK <= n_out; j0 += PK_BLK) {
-        pk_vec acc[PK_BLK / PK_VW];
-        for (int v = 0; v < PK_BLK / PK_VW; ++v) acc[v] = (pk_vec){0};
+/* ---------------------------------------------------------------- matrix-vector
+   y (n_out) = W x with W stored transposed (n_in, n_out): every output summed over the
+   input in order from 0.0 (no sum reassociated), so each kernel below gives the plain
+   loop's bits. Blocks of outputs are summed in vector registers over the whole input
+   before they are stored; pk_matvec2 sums two chains' inputs against each weight load
+   (pk_step_many). */
+#define PK_NV 8
+#define PK_BLK (PK_NV * PK_VW)
+#define PK_NV2 4
+#define PK_BLK2 (PK_NV2 * PK_VW)
+/* y[j], j0 <= j < j1, of y = W x (W transposed, rows of n_out) */
+static void pk_matvec_part(const double *wt, int n_in, int n_out, int j0, int j1,
+                           const double *x, double *y) {
+    for (; j0 + PK_BLK <= j1; j0 += PK_BLK) {
+        pk_vec acc[PK_NV];
+        for (int v = 0; v < PK_NV; ++v) acc[v] = (pk_vec){0};
         for (int i = 0; i < n_in; ++i) {
             const double xi = x[i];
             const pk_vec *w = (const pk_vec *)(wt + (long)i * n_out + j0);
-            for (int v = 0; v < PK_BLK / PK_VW; ++v) acc[v] += w[v] * xi;
+            for (int v = 0; v < PK_NV; ++v) acc[v] += w[v] * xi;
         }
-        for (int v = 0; v < PK_BLK / PK_VW; ++v) ((pk_vec *)(y + j0))[v] = acc[v];
+        for (int v = 0; v < PK_NV; ++v) ((pk_vec *)(y + j0))[v] = acc[v];
     }
-    for (int j = j0; j < n_out; ++j) y[j] = 0.0;
+    for (; j0 + PK_VW <= j1; j0 += PK_VW) {
+        pk_vec acc = {0};
+        for (int i = 0; i < n_in; ++i)
+            acc += *(const pk_vec *)(wt + (long)i * n_out + j0) * x[i];
+        *(pk_vec *)(y + j0) = acc;
+    }
+    for (int j = j0; j < j1; ++j) y[j] = 0.0;
     for (int i = 0; i < n_in; ++i) {
         const double xi = x[i];
         const double *w = wt + (long)i * n_out;
-        for (int j = j0; j < n_out; ++j) y[j] += w[j] * xi;
+        for (int j = j0; j < j1; ++j) y[j] += w[j] * xi;
     }
+}
+
+static void pk_matvec(const double *wt, int n_in, int n_out, const double *x, double *y) {
+    pk_matvec_part(wt, n_in, n_out, 0, n_out, x, y);
+}
+
+/* pk_matvec of two inputs x, x + xs into y, y + ys, each weight load used for both */
+static void pk_matvec2(const double *wt, int n_in, int n_out, const double *x, int xs,
+                       double *y, int ys) {
+    int j0 = 0;
+    for (; j0 + PK_BLK2 <= n_out; j0 += PK_BLK2) {
+        pk_vec a0[PK_NV2], a1[PK_NV2];
+        for (int v = 0; v < PK_NV2; ++v) a0[v] = a1[v] = (pk_vec){0};
+        for (int i = 0; i < n_in; ++i) {
+            const double x0 = x[i], x1 = x[xs + i];
+            const pk_vec *w = (const pk_vec *)(wt + (long)i * n_out + j0);
+            for (int v = 0; v < PK_NV2; ++v) { a0[v] += w[v] * x0; a1[v] += w[v] * x1; }
+        }
+        for (int v = 0; v < PK_NV2; ++v) {
+            ((pk_vec *)(y + j0))[v] = a0[v];
+            ((pk_vec *)(y + ys + j0))[v] = a1[v];
+        }
+    }
+    pk_matvec_part(wt, n_in, n_out, j0, n_out, x, y);
+    pk_matvec_part(wt, n_in, n_out, j0, n_out, x + xs, y + ys);
 }
 
 /* The tanh perceptron of nb inputs z (nb, n_z) at once, layer by layer: out (nb, n_o). */
@@ -285,14 +414,15 @@ static void pk_mlp_many(const pk_layer *L, int n, int nb, const double *z, int n
     const double *h = z;
     int hs = n_z;
     for (int l = 0; l < n; ++l) {
-        int last = l == n - 1, ys = last ? n_o : PK_MAXW;
+        int last = l == n - 1, ys = last ? n_o : PK_MAXW, q = 0;
         double *y = last ? out : ((l % 2) ? b : a);
-        for (int q = 0; q < nb; ++q) {
+        for (; q + 2 <= nb; q += 2)
+            pk_matvec2(L[l].wt, L[l].n_in, L[l].n_out, h + q * hs, hs, y + q * ys, ys);
+        if (q < nb) pk_matvec(L[l].wt, L[l].n_in, L[l].n_out, h + q * hs, y + q * ys);
+        for (q = 0; q < nb; ++q) {
             double *yq = y + q * ys;
-            pk_matvec(L[l].wt, L[l].n_in, L[l].n_out, h + q * hs, yq);
             for (int j = 0; j < L[l].n_out; ++j) yq[j] += L[l].b[j];
-            if (!last)
-                for (int j = 0; j < L[l].n_out; ++j) yq[j] = tanh(yq[j]);
+            if (!last) pk_tanh_n(yq, L[l].n_out);
         }
         h = y;
         hs = ys;
@@ -307,8 +437,7 @@ static void pk_mlp(const pk_layer *L, int n, const double *z, double *out) {
         double *y = (l == n - 1) ? out : ((l % 2) ? b : a);
         pk_matvec(L[l].wt, L[l].n_in, L[l].n_out, h, y);
         for (int j = 0; j < L[l].n_out; ++j) y[j] += L[l].b[j];
-        if (l < n - 1)
-            for (int j = 0; j < L[l].n_out; ++j) y[j] = tanh(y[j]);
+        if (l < n - 1) pk_tanh_n(y, L[l].n_out);
         h = y;
     }
 }
@@ -378,6 +507,7 @@ void pk_start(pk_chain *s, const double x0[2], const double y0[3], const double 
 void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]);
 void pk_step_many(pk_chain *const *s, long n, const double *cmds, double *out);
 void pk_run(pk_chain *s, const double *cmds, long n, double *out);
+void pk_tanh_array(long n, const double *x, double *y);
 #endif
 """
 
@@ -558,5 +688,10 @@ void pk_step(pk_chain *s, const double cmd[4], double out[PK_NOUT]) {{
 
 void pk_run(pk_chain *s, const double *cmds, long n, double *out) {{
     for (long k = 0; k < n; ++k) pk_step(s, cmds + 4 * k, out + PK_NOUT * k);
+}}
+
+void pk_tanh_array(long n, const double *x, double *y) {{
+    if (y != x) memmove(y, x, (size_t)(n > 0 ? n : 0) * sizeof(double));
+    for (long k = 0; k < n; k += 4096) pk_tanh_n(y + k, (int)(n - k < 4096 ? n - k : 4096));
 }}
 """

@@ -10,9 +10,10 @@ one sample in one C call, each NSS layer applied to all of them at once.
 
 :func:`compile_library` builds a shared library from C files with ``cc`` (``$CC``, else
 gcc, else cc), ``-O3 -std=c99 -march=native`` (this machine's vector instructions; C99
-keeps the compiler from contracting a multiply and an add into one rounding, so the
-result is the portable build's bit for bit; a compiler that refuses the flag gets the
-portable build); the result is cached by the SHA-256 of the sources, the flags and the
+keeps the compiler from contracting a multiply and an add into one rounding, and the
+vector code uses basic IEEE operations only, so the result is the portable build's bit
+for bit, tests/chain/test_native.py; a compiler that refuses the flag gets the portable
+build); the result is cached by the SHA-256 of the sources, the flags and the
 machine's CPU under ``$PARKNSS_CACHE`` (default ``~/.cache/parknss``)/native, written
 atomically, so a chain compiles once per machine. No compiler, or a failing build, is
 one-line :class:`~parknss.errors.ParknssError`. The FMU's binary is built portable
@@ -110,20 +111,23 @@ def compile_library(files: dict[str, str], flags: tuple[str, ...] = NATIVE_FLAGS
 
 
 class NativeChain:
-    """A chain's generated C step through ctypes (the interface of RealtimeChain)."""
+    """A chain's generated C step through ctypes (the interface of RealtimeChain), built
+    with ``flags`` (default: for this machine; :data:`CFLAGS`: the FMU's portable build)."""
 
-    def __init__(self, rt: RealtimeChain) -> None:
+    def __init__(self, rt: RealtimeChain, flags: tuple[str, ...] = NATIVE_FLAGS) -> None:
         self.dt = rt.dt
-        self.path = compile_library(chain_c_source(rt).files())
+        self.path = compile_library(chain_c_source(rt).files(), flags)
         lib = ctypes.CDLL(str(self.path))
         lib.pk_size.restype = ctypes.c_size_t
         for fn in (lib.pk_start, lib.pk_step, lib.pk_run, lib.pk_step_many):
             fn.restype = None
         lib.pk_start.argtypes = [ctypes.c_void_p, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P]
         lib.pk_run.argtypes = [ctypes.c_void_p, _DOUBLE_P, ctypes.c_long, _DOUBLE_P]
-        lib.pk_step_many.argtypes = [ctypes.c_void_p, ctypes.c_long, _DOUBLE_P, _DOUBLE_P]
+        lib.pk_step_many.argtypes = [ctypes.c_void_p, ctypes.c_long, ctypes.c_void_p,
+                                     ctypes.c_void_p]
         self._lib = lib
         self._state = ctypes.create_string_buffer(lib.pk_size())
+        self._addr = ctypes.addressof(self._state)  # what pk_step_many's state array holds
         self._cmd = (ctypes.c_double * 4)()
         self._out = (ctypes.c_double * len(OUTPUTS))()
         # pk_step through its own handle without argtypes: the pointers are passed as
@@ -174,12 +178,13 @@ def step_many(chains, cmds) -> np.ndarray:
         raise ParknssError(f"commands must be ({len(chains)}, 4), got {c.shape}")
     if not chains:
         return np.empty((0, len(OUTPUTS)))
-    if len({ch.path for ch in chains}) != 1:
+    path = chains[0].path
+    if any(ch.path != path for ch in chains):
         raise ParknssError("step_many steps chains of one artefact (one compiled library)")
-    out = np.empty((len(chains), len(OUTPUTS)))
-    states = (ctypes.c_void_p * len(chains))(*(ctypes.addressof(ch._state) for ch in chains))
-    chains[0]._lib.pk_step_many(states, len(chains), c.ctypes.data_as(_DOUBLE_P),
-                                out.ctypes.data_as(_DOUBLE_P))
+    lib, k = chains[0]._lib, len(chains)
+    out = np.empty((k, len(OUTPUTS)))
+    lib.pk_step_many((ctypes.c_void_p * k)(*[ch._addr for ch in chains]), k, c.ctypes.data,
+                     out.ctypes.data)
     for ch, g in zip(chains, out[:, 7].tolist(), strict=True):
         ch.gear = g
     return out
