@@ -12,14 +12,17 @@ readout + output net + loss + backward + Adam step, timed for
   cat([x, u_k]) each step, autograd records every operation), and
 * fused: ``engine="fused"`` (input projections precomputed, TorchScript forward loop into
   a preallocated buffer, hand-written reverse-time backward, weight gradients as single
-  large matmuls; parknss.nss.fused),
+  large matmuls; parknss.nss.fused), and
+* fast: the fused engine with ``model.fused_kernels: fast`` (the same functions by
+  cheaper kernels, rounded differently: tanh as 2·σ(2a) - 1, skinny products reordered),
 
 with identical initial weights, data and loss code, in the same run, interleaved epoch by
 epoch, with one intra-op thread. Readout, output network and loss are the same code in
 both (applied to the whole stacked trajectory). Prints the seconds per epoch of each
 (best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
 both (they train identically up to float32 rounding), the ratio eager / fused of the
-best times and, last, the median and range of the ratios of paired (back-to-back) epochs.
+best times and, last, the median and range of the ratios of paired (back-to-back) epochs
+of eager and each fused variant.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ import torch
 from parknss.data.normalize import Normalizer
 from parknss.data.windows import make_windows
 from parknss.nss.batch import Batch, make_batch
-from parknss.nss.config import NSSConfig
+from parknss.nss.config import NSSConfig, with_overrides
 from parknss.nss.model import NORMALIZED
 from parknss.nss.train import build_model, epoch_loss, geometry_of
 
@@ -105,7 +108,12 @@ def main() -> None:
         f"{m.state_layers}x{m.state_units}, output net {m.output_layers}x{m.output_units}, "
         f"{torch.get_num_threads()} thread(s), torch {torch.__version__}"
     )
-    runners = {e: Runner(cfg, norm, geom, batch, e) for e in ("eager", "fused")}
+    fast = with_overrides(cfg, model={"fused_kernels": "fast"})
+    runners = {
+        "eager": Runner(cfg, norm, geom, batch, "eager"),
+        "fused": Runner(cfg, norm, geom, batch, "fused"),
+        "fast": Runner(fast, norm, geom, batch, "fused"),
+    }
     for r in runners.values():
         r.epoch(record=False)  # warm-up (TorchScript profiling, buffer allocation)
     for _ in range(a.repeats):  # interleaved, so both see the same machine load
@@ -115,13 +123,15 @@ def main() -> None:
     for e, r in runners.items():
         best[e] = min(r.times)
         print(
-            f"{e:>5}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
+            f"{e:>7}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
             f"over {len(r.times)} epochs; losses {', '.join(f'{v:.7f}' for v in r.losses)}"
         )
-    print(f"speedup eager/fused: {best['eager'] / best['fused']:.2f}x")
-    paired = [e / f for e, f in zip(runners["eager"].times, runners["fused"].times, strict=True)]
-    print(f"paired epochs eager/fused: median {statistics.median(paired):.2f}x "
-          f"[{min(paired):.2f}-{max(paired):.2f}] over {len(paired)} pairs")
+    for name in ("fused", "fast"):
+        print(f"speedup eager/{name}: {best['eager'] / best[name]:.2f}x")
+    for name in ("fused", "fast"):
+        paired = [e / f for e, f in zip(runners["eager"].times, runners[name].times, strict=True)]
+        print(f"paired epochs eager/{name}: median {statistics.median(paired):.2f}x "
+              f"[{min(paired):.2f}-{max(paired):.2f}] over {len(paired)} pairs")
 
 
 if __name__ == "__main__":

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
+
 import pytest
 import torch
 
 from helpers.synth import make_campaign, tiny_model
 from parknss.data.windows import whole_trials
-from parknss.nss.fused import FusedEulerRollout, euler_forward
+from parknss.nss.fused import KERNELS, FusedEulerRollout, euler_forward
 from parknss.nss.fused_mlp import FusedTanhMLP
 from parknss.nss.workspace import WORKSPACE
 
@@ -43,24 +45,33 @@ def _euler_reference(dt, x0, U, W0, b0, Wout, bout, *hidden):
     return torch.stack(xs)
 
 
+@pytest.mark.parametrize("kernels", KERNELS)
 @pytest.mark.parametrize("hidden_layers", [0, 1, 2])
-def test_fused_euler_gradcheck(hidden_layers):
+def test_fused_euler_gradcheck(hidden_layers, kernels):
     dt = 0.1  # large enough that every term of the BPTT matters
     x0, U, W0, b0, Wout, bout, hidden = _euler_args(hidden_layers=hidden_layers)
     inputs = (x0, U, W0, b0, Wout, bout, *hidden)
     assert torch.autograd.gradcheck(
-        lambda *a: FusedEulerRollout.apply(dt, *a), inputs, eps=1e-6, atol=1e-8
+        lambda *a: FusedEulerRollout.apply(dt, kernels, *a), inputs, eps=1e-6, atol=1e-8
     )
-    # and the values are the recurrence itself
-    X = FusedEulerRollout.apply(dt, *inputs)
+    # and the values are the recurrence itself (with torch.tanh), with either kernels
+    X = FusedEulerRollout.apply(dt, kernels, *inputs)
     torch.testing.assert_close(X, _euler_reference(dt, *inputs), rtol=0, atol=1e-13)
     assert torch.equal(X[0], x0)
-    Xn = euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], dt=dt)
+    Ws, bs = hidden[0::2], hidden[1::2]
+    Xn = euler_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt=dt, kernels=kernels)
     torch.testing.assert_close(Xn, X.detach(), rtol=0, atol=1e-14)
 
 
+def test_unknown_kernels_are_refused():
+    x0, U, W0, b0, Wout, bout, hidden = _euler_args()
+    with pytest.raises(ValueError, match="fused kernels"):
+        euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], 0.1, kernels="x")
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
 @pytest.mark.parametrize("layers", [1, 2, 3])
-def test_fused_mlp_gradcheck(layers):
+def test_fused_mlp_gradcheck(layers, kernels):
     g = torch.Generator().manual_seed(1)
     N, n_in, H = 7, 5, 4
     x = _rand(N, n_in, gen=g)
@@ -70,12 +81,13 @@ def test_fused_mlp_gradcheck(layers):
         params += [_rand(H, width, gen=g), _rand(H, gen=g)]
         width = H
     params += [_rand(2, H, gen=g), _rand(2, gen=g)]
-    assert torch.autograd.gradcheck(FusedTanhMLP.apply, (x, *params), eps=1e-6, atol=1e-8)
+    mlp = functools.partial(FusedTanhMLP.apply, kernels)
+    assert torch.autograd.gradcheck(mlp, (x, *params), eps=1e-6, atol=1e-8)
     ref = x
     for W, b in zip(params[0:-2:2], params[1:-2:2], strict=True):
         ref = torch.tanh(ref @ W.t() + b)
     ref = ref @ params[-2].t() + params[-1]
-    torch.testing.assert_close(FusedTanhMLP.apply(x, *params), ref, rtol=0, atol=1e-14)
+    torch.testing.assert_close(mlp(x, *params), ref, rtol=0, atol=1e-14)
 
 
 def _case(**model):
