@@ -145,6 +145,31 @@ def test_fused_equals_eager_in_float32():
         torch.testing.assert_close(gf[n], ge[n], rtol=0, atol=1e-5 * float(ge[n].abs().max()))
 
 
+def _rel_errors(kernels: str) -> dict[str, float]:
+    """Max |float32 - float64| / max |float64| of the states and of every gradient, float32
+    with these kernels against the float64 reference (same initial weights)."""
+    camp = make_campaign(120, reps=1)
+    w = whole_trials(list(camp))
+    x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
+    m64, _ = tiny_model(camp, seed=3)
+    m32, _ = tiny_model(camp, seed=3, dtype="float32", model={"fused_kernels": kernels})
+    r64, g64, _ = _grads(m64, x0, u, "fused")
+    r32, g32, _ = _grads(m32, x0, u, "fused")
+    assert r32.vx.dtype == torch.float32
+
+    def rel(a, b):
+        return float((a.detach().double() - b).abs().max() / b.abs().max())
+
+    return {"state_s": rel(r32.state_s, r64.state_s)} | {n: rel(g32[n], g64[n]) for n in g64}
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_float32_kernels_agree_with_float64(kernels):
+    """Both kernels in float32 against float64: states and gradients to 1e-5 relative."""
+    errs = _rel_errors(kernels)
+    assert max(errs.values()) < 1e-5, errs
+
+
 def test_fused_input_gradient_with_frozen_weights():
     """Gradients w.r.t. the inputs flow through the fused rollout of a frozen model."""
     m, x0, u = _case()
