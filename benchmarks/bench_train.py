@@ -9,7 +9,7 @@ tanh, forward Euler, the full loss of eq. 8. One epoch = rollout of all windows 
 readout + output net + loss + backward + Adam step, timed for
 
 * eager: the plain per-step autograd loop (``engine="eager"``: nn.Linear layers on
-  cat([x, u_k]) each step, autograd records every operation), and
+  cat([x, u_k]) each step, autograd records every operation),
 * fused: ``engine="fused"`` (input projections precomputed, TorchScript forward loop into
   a preallocated buffer, hand-written reverse-time backward, weight gradients as single
   large matmuls; parknss.nss.fused), and
@@ -18,11 +18,13 @@ readout + output net + loss + backward + Adam step, timed for
 
 with identical initial weights, data and loss code, in the same run, interleaved epoch by
 epoch, with one intra-op thread. Readout, output network and loss are the same code in
-both (applied to the whole stacked trajectory). Prints the seconds per epoch of each
+all (applied to the whole stacked trajectory). Prints the seconds per epoch of each
 (best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
-both (they train identically up to float32 rounding), the ratio eager / fused of the
+all (they train identically up to float32 rounding), the ratio eager / fused of the
 best times and, last, the median and range of the ratios of paired (back-to-back) epochs
-of eager and each fused variant.
+of eager and each fused variant, in wall seconds and in CPU seconds
+(``time.process_time``: on a loaded machine the wall time of an epoch counts the other
+processes' turns, its CPU time much less so).
 """
 
 from __future__ import annotations
@@ -75,18 +77,20 @@ class Runner:
         self.model = build_model(cfg, norm, geom)
         self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.times: list[float] = []
+        self.cpu: list[float] = []
         self.losses: list[float] = []
 
     def epoch(self, record: bool = True) -> None:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         self.opt.zero_grad(set_to_none=True)
         terms = epoch_loss(self.model, self.batch, self.cfg, engine=self.engine)
         terms.total.backward()
         self.opt.step()
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         self.losses.append(float(terms.total.detach()))
         if record:
             self.times.append(dt)
+            self.cpu.append(dc)
 
 
 def main() -> None:
@@ -122,16 +126,20 @@ def main() -> None:
     best = {}
     for e, r in runners.items():
         best[e] = min(r.times)
+        losses = ", ".join(f"{v:.7f}" for v in r.losses)
         print(
-            f"{e:>7}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
-            f"over {len(r.times)} epochs; losses {', '.join(f'{v:.7f}' for v in r.losses)}"
+            f"{e:>5}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
+            f"(CPU best {min(r.cpu):.3f} s) over {len(r.times)} epochs; losses {losses}"
         )
     for name in ("fused", "fast"):
         print(f"speedup eager/{name}: {best['eager'] / best[name]:.2f}x")
-    for name in ("fused", "fast"):
-        paired = [e / f for e, f in zip(runners["eager"].times, runners[name].times, strict=True)]
-        print(f"paired epochs eager/{name}: median {statistics.median(paired):.2f}x "
-              f"[{min(paired):.2f}-{max(paired):.2f}] over {len(paired)} pairs")
+    for clock in ("times", "cpu"):
+        for name in ("fused", "fast"):
+            eager, other = getattr(runners["eager"], clock), getattr(runners[name], clock)
+            paired = [e / f for e, f in zip(eager, other, strict=True)]
+            print(f"paired epochs eager/{name} ({'wall' if clock == 'times' else 'CPU'}): median "
+                  f"{statistics.median(paired):.2f}x [{min(paired):.2f}-{max(paired):.2f}] over "
+                  f"{len(paired)} pairs")
 
 
 if __name__ == "__main__":
