@@ -145,6 +145,19 @@ def test_fused_equals_eager_in_float32():
         torch.testing.assert_close(gf[n], ge[n], rtol=0, atol=1e-5 * float(ge[n].abs().max()))
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, F64])
+def test_reference_tanh_derivative_is_tanh_backward_bit_for_bit(dtype):
+    """The reverse-time loop's addcmul + mul is aten's tanh_backward to the last bit (what
+    keeps the reference kernels' numerics; also on a length that leaves a SIMD tail)."""
+    g = torch.Generator().manual_seed(5)
+    for shape in [(29, 128), (3, 37)]:
+        grad = torch.randn(shape, generator=g, dtype=dtype)
+        h = torch.tanh(2 * torch.randn(shape, generator=g, dtype=dtype))
+        one = torch.ones((), dtype=dtype)
+        mine = torch.mul(grad, torch.addcmul(one, h, h, value=-1.0))
+        assert torch.equal(mine, torch.ops.aten.tanh_backward(grad, h))
+
+
 def _rel_errors(kernels: str) -> dict[str, float]:
     """Max |float32 - float64| / max |float64| of the states and of every gradient, float32
     with these kernels against the float64 reference (same initial weights)."""
