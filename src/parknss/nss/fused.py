@@ -12,6 +12,8 @@ module computes exactly the same recurrence as one :class:`torch.autograd.Functi
 * the backward is a reverse-time loop over the stored activations: per step only the
   products δ·W and the fused tanh derivative; the weight gradients are then single large
   matmuls over all steps and windows, Σ_k δ_kᵀ h_k, at full matmul efficiency;
+* ``kernels="fast"`` (:data:`KERNELS`, ``model.fused_kernels``) evaluates the same
+  functions by cheaper kernels with other rounding; the default keeps the old numbers;
 * the large buffers (input projections, activations, deltas) are recycled between epochs
   (:mod:`parknss.nss.workspace`), so hundreds of MB of fresh pages are not faulted in
   every epoch.
