@@ -9,17 +9,22 @@ tanh, forward Euler, the full loss of eq. 8. One epoch = rollout of all windows 
 readout + output net + loss + backward + Adam step, timed for
 
 * eager: the plain per-step autograd loop (``engine="eager"``: nn.Linear layers on
-  cat([x, u_k]) each step, autograd records every operation), and
+  cat([x, u_k]) each step, autograd records every operation),
 * fused: ``engine="fused"`` (input projections precomputed, TorchScript forward loop into
   a preallocated buffer, hand-written reverse-time backward, weight gradients as single
-  large matmuls; parknss.nss.fused),
+  large matmuls; parknss.nss.fused), and
+* fast: the fused engine with ``model.fused_kernels: fast`` (the same functions by
+  cheaper kernels, rounded differently: tanh as 2·σ(2a) - 1, skinny products reordered),
 
 with identical initial weights, data and loss code, in the same run, interleaved epoch by
 epoch, with one intra-op thread. Readout, output network and loss are the same code in
-both (applied to the whole stacked trajectory). Prints the seconds per epoch of each
+all (applied to the whole stacked trajectory). Prints the seconds per epoch of each
 (best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
-both (they train identically up to float32 rounding), the ratio eager / fused of the
-best times and, last, the median and range of the ratios of paired (back-to-back) epochs.
+all (they train identically up to float32 rounding), the ratio eager / fused of the
+best times and, last, the median and range of the ratios of paired (back-to-back) epochs
+of eager and each fused variant, in wall seconds and in CPU seconds
+(``time.process_time``: on a loaded machine the wall time of an epoch counts the other
+processes' turns, its CPU time much less so).
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import torch
 from parknss.data.normalize import Normalizer
 from parknss.data.windows import make_windows
 from parknss.nss.batch import Batch, make_batch
-from parknss.nss.config import NSSConfig
+from parknss.nss.config import NSSConfig, with_overrides
 from parknss.nss.model import NORMALIZED
 from parknss.nss.train import build_model, epoch_loss, geometry_of
 
@@ -72,18 +77,20 @@ class Runner:
         self.model = build_model(cfg, norm, geom)
         self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.train.lr)
         self.times: list[float] = []
+        self.cpu: list[float] = []
         self.losses: list[float] = []
 
     def epoch(self, record: bool = True) -> None:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         self.opt.zero_grad(set_to_none=True)
         terms = epoch_loss(self.model, self.batch, self.cfg, engine=self.engine)
         terms.total.backward()
         self.opt.step()
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         self.losses.append(float(terms.total.detach()))
         if record:
             self.times.append(dt)
+            self.cpu.append(dc)
 
 
 def main() -> None:
@@ -105,7 +112,12 @@ def main() -> None:
         f"{m.state_layers}x{m.state_units}, output net {m.output_layers}x{m.output_units}, "
         f"{torch.get_num_threads()} thread(s), torch {torch.__version__}"
     )
-    runners = {e: Runner(cfg, norm, geom, batch, e) for e in ("eager", "fused")}
+    fast = with_overrides(cfg, model={"fused_kernels": "fast"})
+    runners = {
+        "eager": Runner(cfg, norm, geom, batch, "eager"),
+        "fused": Runner(cfg, norm, geom, batch, "fused"),
+        "fast": Runner(fast, norm, geom, batch, "fused"),
+    }
     for r in runners.values():
         r.epoch(record=False)  # warm-up (TorchScript profiling, buffer allocation)
     for _ in range(a.repeats):  # interleaved, so both see the same machine load
@@ -114,14 +126,20 @@ def main() -> None:
     best = {}
     for e, r in runners.items():
         best[e] = min(r.times)
+        losses = ", ".join(f"{v:.7f}" for v in r.losses)
         print(
             f"{e:>5}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
-            f"over {len(r.times)} epochs; losses {', '.join(f'{v:.7f}' for v in r.losses)}"
+            f"(CPU best {min(r.cpu):.3f} s) over {len(r.times)} epochs; losses {losses}"
         )
-    print(f"speedup eager/fused: {best['eager'] / best['fused']:.2f}x")
-    paired = [e / f for e, f in zip(runners["eager"].times, runners["fused"].times, strict=True)]
-    print(f"paired epochs eager/fused: median {statistics.median(paired):.2f}x "
-          f"[{min(paired):.2f}-{max(paired):.2f}] over {len(paired)} pairs")
+    for name in ("fused", "fast"):
+        print(f"speedup eager/{name}: {best['eager'] / best[name]:.2f}x")
+    for clock in ("times", "cpu"):
+        for name in ("fused", "fast"):
+            eager, other = getattr(runners["eager"], clock), getattr(runners[name], clock)
+            paired = [e / f for e, f in zip(eager, other, strict=True)]
+            print(f"paired epochs eager/{name} ({'wall' if clock == 'times' else 'CPU'}): median "
+                  f"{statistics.median(paired):.2f}x [{min(paired):.2f}-{max(paired):.2f}] over "
+                  f"{len(paired)} pairs")
 
 
 if __name__ == "__main__":

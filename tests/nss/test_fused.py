@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
+
 import pytest
 import torch
 
 from helpers.synth import make_campaign, tiny_model
 from parknss.data.windows import whole_trials
-from parknss.nss.fused import FusedEulerRollout, euler_forward
+from parknss.nss.fused import KERNELS, FusedEulerRollout, euler_forward
 from parknss.nss.fused_mlp import FusedTanhMLP
 from parknss.nss.workspace import WORKSPACE
 
@@ -43,24 +45,33 @@ def _euler_reference(dt, x0, U, W0, b0, Wout, bout, *hidden):
     return torch.stack(xs)
 
 
+@pytest.mark.parametrize("kernels", KERNELS)
 @pytest.mark.parametrize("hidden_layers", [0, 1, 2])
-def test_fused_euler_gradcheck(hidden_layers):
+def test_fused_euler_gradcheck(hidden_layers, kernels):
     dt = 0.1  # large enough that every term of the BPTT matters
     x0, U, W0, b0, Wout, bout, hidden = _euler_args(hidden_layers=hidden_layers)
     inputs = (x0, U, W0, b0, Wout, bout, *hidden)
     assert torch.autograd.gradcheck(
-        lambda *a: FusedEulerRollout.apply(dt, *a), inputs, eps=1e-6, atol=1e-8
+        lambda *a: FusedEulerRollout.apply(dt, kernels, *a), inputs, eps=1e-6, atol=1e-8
     )
-    # and the values are the recurrence itself
-    X = FusedEulerRollout.apply(dt, *inputs)
+    # and the values are the recurrence itself (with torch.tanh), with either kernels
+    X = FusedEulerRollout.apply(dt, kernels, *inputs)
     torch.testing.assert_close(X, _euler_reference(dt, *inputs), rtol=0, atol=1e-13)
     assert torch.equal(X[0], x0)
-    Xn = euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], dt=dt)
+    Ws, bs = hidden[0::2], hidden[1::2]
+    Xn = euler_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt=dt, kernels=kernels)
     torch.testing.assert_close(Xn, X.detach(), rtol=0, atol=1e-14)
 
 
+def test_unknown_kernels_are_refused():
+    x0, U, W0, b0, Wout, bout, hidden = _euler_args()
+    with pytest.raises(ValueError, match="fused kernels"):
+        euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], 0.1, kernels="x")
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
 @pytest.mark.parametrize("layers", [1, 2, 3])
-def test_fused_mlp_gradcheck(layers):
+def test_fused_mlp_gradcheck(layers, kernels):
     g = torch.Generator().manual_seed(1)
     N, n_in, H = 7, 5, 4
     x = _rand(N, n_in, gen=g)
@@ -70,12 +81,13 @@ def test_fused_mlp_gradcheck(layers):
         params += [_rand(H, width, gen=g), _rand(H, gen=g)]
         width = H
     params += [_rand(2, H, gen=g), _rand(2, gen=g)]
-    assert torch.autograd.gradcheck(FusedTanhMLP.apply, (x, *params), eps=1e-6, atol=1e-8)
+    mlp = functools.partial(FusedTanhMLP.apply, kernels)
+    assert torch.autograd.gradcheck(mlp, (x, *params), eps=1e-6, atol=1e-8)
     ref = x
     for W, b in zip(params[0:-2:2], params[1:-2:2], strict=True):
         ref = torch.tanh(ref @ W.t() + b)
     ref = ref @ params[-2].t() + params[-1]
-    torch.testing.assert_close(FusedTanhMLP.apply(x, *params), ref, rtol=0, atol=1e-14)
+    torch.testing.assert_close(mlp(x, *params), ref, rtol=0, atol=1e-14)
 
 
 def _case(**model):
@@ -131,6 +143,44 @@ def test_fused_equals_eager_in_float32():
     torch.testing.assert_close(rf.state_s, re.state_s, rtol=0, atol=1e-5)
     for n in gf:
         torch.testing.assert_close(gf[n], ge[n], rtol=0, atol=1e-5 * float(ge[n].abs().max()))
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, F64])
+def test_reference_tanh_derivative_is_tanh_backward_bit_for_bit(dtype):
+    """The reverse-time loop's addcmul + mul is aten's tanh_backward to the last bit (what
+    keeps the reference kernels' numerics; also on a length that leaves a SIMD tail)."""
+    g = torch.Generator().manual_seed(5)
+    for shape in [(29, 128), (3, 37)]:
+        grad = torch.randn(shape, generator=g, dtype=dtype)
+        h = torch.tanh(2 * torch.randn(shape, generator=g, dtype=dtype))
+        one = torch.ones((), dtype=dtype)
+        mine = torch.mul(grad, torch.addcmul(one, h, h, value=-1.0))
+        assert torch.equal(mine, torch.ops.aten.tanh_backward(grad, h))
+
+
+def _rel_errors(kernels: str) -> dict[str, float]:
+    """Max |float32 - float64| / max |float64| of the states and of every gradient, float32
+    with these kernels against the float64 reference (same initial weights)."""
+    camp = make_campaign(120, reps=1)
+    w = whole_trials(list(camp))
+    x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
+    m64, _ = tiny_model(camp, seed=3)
+    m32, _ = tiny_model(camp, seed=3, dtype="float32", model={"fused_kernels": kernels})
+    r64, g64, _ = _grads(m64, x0, u, "fused")
+    r32, g32, _ = _grads(m32, x0, u, "fused")
+    assert r32.vx.dtype == torch.float32
+
+    def rel(a, b):
+        return float((a.detach().double() - b).abs().max() / b.abs().max())
+
+    return {"state_s": rel(r32.state_s, r64.state_s)} | {n: rel(g32[n], g64[n]) for n in g64}
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_float32_kernels_agree_with_float64(kernels):
+    """Both kernels in float32 against float64: states and gradients to 1e-5 relative."""
+    errs = _rel_errors(kernels)
+    assert max(errs.values()) < 1e-5, errs
 
 
 def test_fused_input_gradient_with_frozen_weights():

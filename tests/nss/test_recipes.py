@@ -120,3 +120,16 @@ def test_fast_fit_identity_leaves_out_what_the_fast_recipe_does_not_read():
     assert fit_identity(with_overrides(fast, train={"lr_min": 1e-6})) != ident  # read
     paper = tiny_config()
     assert fit_identity(with_overrides(paper, train={"epochs": 77})) != fit_identity(paper)
+
+
+def test_fit_identity_has_the_fused_kernels_only_when_not_the_reference():
+    """The default kernels keep the keys fits had before the option existed; the fast
+    ones (other rounding) make another fit."""
+    from parknss.nss.config import fit_identity
+
+    cfg = tiny_config()
+    ident = fit_identity(cfg)
+    assert "fused_kernels" not in ident["model"]
+    fast = fit_identity(with_overrides(cfg, model={"fused_kernels": "fast"}))
+    assert fast["model"]["fused_kernels"] == "fast"
+    assert {k: v for k, v in fast["model"].items() if k != "fused_kernels"} == ident["model"]

@@ -33,6 +33,12 @@ class ModelConfig(StrictModel):
         description="recurrence engine: fused (whole-rollout autograd.Function, Euler only), "
         "eager (plain per-step autograd loop), auto (fused when possible)",
     )
+    fused_kernels: Literal["reference", "fast"] = Field(
+        "reference",
+        description="arithmetic of the fused engine: reference (the rounding the stored fits "
+        "were made with) or fast (the same functions by cheaper kernels, tanh as 2σ(2a)-1; "
+        "rounded differently, measured against float64 in docs/nss.md)",
+    )
 
 
 class LossConfig(StrictModel):
@@ -166,6 +172,8 @@ def fit_identity(cfg: NSSConfig) -> dict:
     doc["train"].pop("threads", None)
     if cfg.train.selection == "scored":  # the default keeps the keys it had without it
         doc["train"].pop("selection", None)
+    if cfg.model.fused_kernels == "reference":  # likewise
+        doc["model"].pop("fused_kernels", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)

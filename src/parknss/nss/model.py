@@ -225,9 +225,11 @@ class NSSModel(nn.Module):
         needs_grad = x0_s.requires_grad or U.requires_grad
         needs_grad = needs_grad or any(p.requires_grad for p in self.state_net.parameters())
         if torch.is_grad_enabled() and needs_grad:
-            X = FusedEulerRollout.apply(self.dt, *args, *hidden)
+            X = FusedEulerRollout.apply(self.dt, self.cfg.fused_kernels, *args, *hidden)
         else:
-            X = euler_forward(*args, hidden[0::2], hidden[1::2], dt=self.dt)
+            X = euler_forward(
+                *args, hidden[0::2], hidden[1::2], dt=self.dt, kernels=self.cfg.fused_kernels
+            )
         return X.transpose(0, 1)
 
     def _eager(self, x0_s: Tensor, u_s: Tensor, limiter: StateLimiter | None) -> Tensor:
@@ -259,7 +261,7 @@ class NSSModel(nn.Module):
         lin = linear_layers(self.output_net)
         params = [t for m in lin for t in (m.weight, m.bias)]
         flat = g_in.reshape(-1, g_in.shape[-1]).contiguous()
-        return FusedTanhMLP.apply(flat, *params).view(*g_in.shape[:-1], -1)
+        return FusedTanhMLP.apply(self.cfg.fused_kernels, flat, *params).view(*g_in.shape[:-1], -1)
 
     def reconstruct_yaw(self, X_s: Tensor, steer_s: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """The yaw readout (eq. 5) at internal states X_s (..., 2) and scaled steering (...):
