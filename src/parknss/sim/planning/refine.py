@@ -188,7 +188,7 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
     # rounds below still hold the margin between knots
     d_min = np.full(n + 1, lim.d_min)
     if obstacles:
-        clr = geometry.clearance(ws.poses, geom, obstacles, cutoff=lim.d_min + 1.0)
+        clr = geometry.clearance(ws.poses, geom, obstacles, cutoff=lim.d_min)  # exact below
         d_min = np.minimum(d_min, np.maximum(margin, clr))
     detail: dict = {"intervals": n, "obstacles": len(terms), "iterations": 0, "repairs": 0}
     sol = None
@@ -238,7 +238,7 @@ def _short_intervals(out: Segment, h: float, n: int, obstacles, geom, pcfg, marg
         return {}
     step, dh = pcfg.dense.max_step_m, math.radians(pcfg.dense.max_dheading_deg)
     dense = geometry.densify(np.column_stack([out.poses, out.t]), step, dh)
-    clr = geometry.clearance(dense[:, :3], geom, obstacles, cutoff=1.0)
+    clr = geometry.clearance(dense[:, :3], geom, obstacles, cutoff=margin)  # exact below
     bad = np.flatnonzero(clr < margin)
     k = np.clip(np.floor(dense[bad, 3] / h + 1e-9).astype(int), 0, n - 1)
     short: dict[int, float] = {}
