@@ -75,7 +75,9 @@ class RefineConfig(StrictModel):
         description="CPU-time guard of each IPOPT solve and of the whole path, s (max_iter binds)",
     )
     program_cache_size: int = Field(
-        64, ge=0, description="segment programs kept built, by structure (0: build every solve)"
+        16,
+        ge=0,
+        description="segment programs kept built, by structure, ~3 MiB each (0: build every solve)",
     )
     tol: float = Field(1e-6, gt=0.0, description="IPOPT convergence tolerance")
     mu_strategy: Literal["adaptive", "monotone"] = Field("adaptive", description="IPOPT barrier")
