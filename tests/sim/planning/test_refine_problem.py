@@ -91,3 +91,21 @@ def test_the_program_cache_is_keyed_by_structure_and_bounded(segment):
     assert key != rp.structure_key(len(ws.poses) - 1, ws.direction, terms, None, GEOM, lim,
                                    tighter, 1.0)
     rp.clear_programs()
+
+
+def test_one_program_solves_on_several_threads_at_once(segment):
+    """The web page plans on worker threads: a shared program gives each thread its own
+    answer, the same as solved alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    ws, terms, bounds, lim, rc = segment
+    rp.clear_programs()
+    shifts = [(0.0, 0.0), (3.25, -1.5), (-2.0, 4.0), (1.0, 1.0)]
+    cases = [_moved(ws, terms, bounds, s) for s in shifts]
+    alone = [_solve(*c, lim, rc) for c in cases]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        together = list(pool.map(lambda c: _solve(*c, lim, rc), cases * 2))
+    assert len(rp._PROGRAMS) == 1
+    for i, sol in enumerate(together):
+        _same(sol, alone[i % len(cases)], atol=1e-12)
+    rp.clear_programs()

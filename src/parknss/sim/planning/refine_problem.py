@@ -33,6 +33,7 @@ freshly built one (the same expression graph; tests/sim/planning/test_refine_pro
 from __future__ import annotations
 
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -140,10 +141,11 @@ def solve_segment(
     """
     n = len(ws.poses) - 1
     try:
-        prog = segment_program(n, ws.direction, terms, planes, geom, lim, cfg, cpu_time_s)
         args = program_inputs(ws, terms, bounds, lim, cfg, d_min, init, planes)
-        res = prog.solver(**args)
-        stats = prog.solver.stats()
+        with _LOCK:  # one solve at a time in the process (see _LOCK)
+            prog = segment_program(n, ws.direction, terms, planes, geom, lim, cfg, cpu_time_s)
+            res = prog.solver(**args)
+            stats = prog.solver.stats()
     except Exception as exc:  # any CasADi/IPOPT error (evaluation, input) fails the solve
         first = (str(exc).splitlines() or [type(exc).__name__])[0][:80]
         return _failed(ws, f"solver error ({type(exc).__name__}: {first})")
@@ -185,6 +187,10 @@ class SegmentProgram:
 
 _PROGRAMS: OrderedDict[tuple, SegmentProgram] = OrderedDict()
 """The built programs by :func:`structure_key`, least recently used first."""
+_LOCK = threading.RLock()
+"""Held while a program is built or solved: plans may run on threads (the web page's
+workers), and one CasADi/IPOPT solver called from two threads at once crashes the
+process (measured: tests/sim/planning/test_refine_problem.py), so solves take turns."""
 
 
 def structure_key(n, direction, terms, planes, geom, lim, cfg, cpu_time_s) -> tuple:
@@ -208,19 +214,21 @@ def segment_program(n, direction, terms, planes, geom, lim, cfg, cpu_time_s) -> 
     """The cached :class:`SegmentProgram` of this structure, built on a miss (the cache
     keeps ``cfg.program_cache_size`` programs; 0: always built afresh)."""
     key = structure_key(n, direction, terms, planes, geom, lim, cfg, cpu_time_s)
-    prog = _PROGRAMS.pop(key, None)
-    if prog is None:
-        prog = build_program(n, direction, terms, planes, geom, lim, cfg, cpu_time_s)
-    if cfg.program_cache_size > 0:
-        _PROGRAMS[key] = prog  # the most recently used last
-    while len(_PROGRAMS) > cfg.program_cache_size:
-        _PROGRAMS.popitem(last=False)
+    with _LOCK:
+        prog = _PROGRAMS.pop(key, None)
+        if prog is None:
+            prog = build_program(n, direction, terms, planes, geom, lim, cfg, cpu_time_s)
+        if cfg.program_cache_size > 0:
+            _PROGRAMS[key] = prog  # the most recently used last
+        while len(_PROGRAMS) > cfg.program_cache_size:
+            _PROGRAMS.popitem(last=False)
     return prog
 
 
 def clear_programs() -> None:
     """Forget every cached program (the next solve of each structure builds it again)."""
-    _PROGRAMS.clear()
+    with _LOCK:
+        _PROGRAMS.clear()
 
 
 def build_program(n, direction, terms, planes, geom, lim, cfg, cpu_time_s) -> SegmentProgram:
