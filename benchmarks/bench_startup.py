@@ -1,6 +1,7 @@
 """Start-up of the command line: whole-process times of light commands, in one run.
 
     python benchmarks/bench_startup.py [--repeats 5] [--json] [--baseline ../main/src]
+        [--no-bytecode-cache]
 
 Runs, interleaved ``--repeats`` times each as a fresh process: the bare interpreter
 (``python -c pass``), ``parknss --help``, ``parknss plan --help``, importing the ISO/TS
@@ -13,6 +14,13 @@ each process's CPU time (user + system; on a loaded machine steadier than the wa
 ``--baseline SRC`` also runs ``--help`` and ``plan`` from another checkout's ``src``
 (main's), interleaved, and prints baseline / this. The machine's load is printed with
 them: on a shared machine every absolute time is inflated, ratios less so.
+
+Bytecode: an installed package runs from cached bytecode (.pyc), but a checkout run with
+``PYTHONDONTWRITEBYTECODE`` set (as here) compiles every parknss module from source in
+every process (about 0.05-0.1 CPU s of ``plan`` here). So the processes run with a cache
+in the temporary folder (``PYTHONPYCACHEPREFIX``, warmed by one untimed run of each
+command), as a user's would; ``--no-bytecode-cache`` runs them in the environment as
+given.
 """
 
 from __future__ import annotations
@@ -72,6 +80,9 @@ def main() -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--baseline", metavar="SRC", help="another checkout's src/ (e.g. main's): "
                     "its --help and plan runs interleaved with these, as ratios")
+    ap.add_argument("--no-bytecode-cache", action="store_true",
+                    help="run the processes in the environment as given (with "
+                    "PYTHONDONTWRITEBYTECODE set, parknss compiles from source every time)")
     args = ap.parse_args()
     names = [*CASES, PLAN, BARE]
     if args.baseline:
@@ -80,15 +91,24 @@ def main() -> int:
     cpus: dict[str, list[float]] = {k: [] for k in times}
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
+        env0 = dict(os.environ)
+        if not args.no_bytecode_cache:
+            env0.pop("PYTHONDONTWRITEBYTECODE", None)
+            env0["PYTHONPYCACHEPREFIX"] = str(Path(tmp) / "pycache")
+        plan = [PY, "-m", "parknss.cli", "plan", "--scene", "26", "--json", "--out"]
+        if not args.no_bytecode_cache:  # warm the cache: one untimed run of each
+            for src in [None, args.baseline] if args.baseline else [None]:
+                env = env0 if src is None else {**env0, "PYTHONPATH": src}
+                for cmd in [*CASES.values(), [*plan, str(Path(tmp) / "warm"), "--overwrite"]]:
+                    _wall(cmd, None, env)
         for r in range(args.repeats):
             for name, cmd in CASES.items():
-                times[name].append(_wall(cmd, cpus[name]))
-            plan = [PY, "-m", "parknss.cli", "plan", "--scene", "26", "--json", "--out"]
-            times[PLAN].append(_wall([*plan, str(Path(tmp) / f"plan{r}")], cpus[PLAN]))
+                times[name].append(_wall(cmd, cpus[name], env0))
+            times[PLAN].append(_wall([*plan, str(Path(tmp) / f"plan{r}")], cpus[PLAN], env0))
             times[BARE].append(_wall([*plan, str(Path(tmp) / f"bare{r}"), "--no-figure"],
-                                     cpus[BARE]))
+                                     cpus[BARE], env0))
             if args.baseline:
-                env = {**os.environ, "PYTHONPATH": args.baseline}
+                env = {**env0, "PYTHONPATH": args.baseline}
                 for name, cmd in (("parknss --help", CASES["parknss --help"]),
                                   (PLAN, [*plan, str(Path(tmp) / f"base{r}")])):
                     key = f"{name} [baseline]"
@@ -99,6 +119,7 @@ def main() -> int:
     plan_alone = float(np.median(planning))
     doc = {
         "repeats": args.repeats, "load_average": [load0, load1], "cores": os.cpu_count(),
+        "bytecode_cache": not args.no_bytecode_cache,
         "median_s": med, "median_cpu_s": {k: float(np.median(v)) for k, v in cpus.items()},
         "range_s": {k: [min(v), max(v)] for k, v in times.items()},
         "planning_in_process_s": plan_alone,
@@ -109,7 +130,8 @@ def main() -> int:
         print(json.dumps(doc, indent=2))
         return 0
     print(f"one run, median [range] of {args.repeats} fresh processes each; load average "
-          f"{load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores")
+          f"{load0:.1f} -> {load1:.1f} on {os.cpu_count()} cores; bytecode "
+          f"{'cached' if doc['bytecode_cache'] else 'as the environment has it'}")
     for k, v in times.items():
         print(f"  {k:34s} {med[k]:6.3f} s [{min(v):.3f}-{max(v):.3f}]  "
               f"{doc['ratio_to_bare_python'][k]:6.1f}x bare python; CPU "

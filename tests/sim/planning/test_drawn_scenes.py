@@ -91,11 +91,11 @@ def test_any_solver_error_becomes_the_flagged_coarse_fallback(monkeypatch):
     cfg = load_planning_config()
     coarse = HybridAStar(cfg, GEOM).plan(scene).trajectory
 
-    class Broken:
-        def __init__(self):
-            raise RuntimeError("Opti::set_initial: Assertion 'is_regular' failed")
+    def broken(*_a, **_k):
+        raise RuntimeError("nlpsol: Assertion 'is_regular' failed")
 
-    monkeypatch.setattr(refine_problem.ca, "Opti", Broken)
+    refine_problem.clear_programs()  # every segment's program is built (and fails)
+    monkeypatch.setattr(refine_problem.ca, "nlpsol", broken)
     res = refine(scene, coarse, GEOM, cfg)
     assert not res.ok and res.trajectory.source == "coarse_fallback"
     assert "solver error (RuntimeError" in res.reason

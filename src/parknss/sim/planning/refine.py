@@ -2,16 +2,17 @@
 
 ``refine(scene, coarse, geom, config)`` turns the coarse path (gear segments of arcs at
 full lock or straight, no timing) into a smooth, time-parameterised trajectory: each gear
-segment is solved separately as a nonlinear program (:mod:`.refine_problem`; CasADi Opti,
-IPOPT with MUMPS) with the kinematic bicycle integrated exactly over N intervals of a
-free time step, bounds on speed (parking limit), acceleration, jerk, steering angle
-(the lock of ``geom``, which already holds back the tracker's reserve) and steering
-rate, standstill at every cusp and at the goal, the cusp, start and goal poses fixed,
-and collision avoidance with a safety margin by the H-OBCA dual distance constraint
-(:mod:`.refine_obca`) for the obstacles a broad phase finds near each knot. The
-warm start is the coarse segment timed by a trapezoidal profile; the cost is time plus
-acceleration and steering-rate smoothness plus deviation from the warm start
-(``refine:`` in configs/planning.yaml, :class:`RefineConfig`).
+segment is solved separately as a nonlinear program (:mod:`.refine_problem`; CasADi SX,
+IPOPT with MUMPS, each program built once per structure and reused) with the kinematic
+bicycle integrated exactly over N intervals of a free time step, bounds on speed
+(parking limit), acceleration, jerk, steering angle (the lock of ``geom``, which
+already holds back the tracker's reserve) and steering rate, standstill at every cusp
+and at the goal, the cusp, start and goal poses fixed, and collision avoidance with a
+safety margin by the H-OBCA dual distance constraint (:mod:`.refine_obca`) for the
+obstacles a broad phase finds near each knot. The warm start is the coarse segment
+timed by a trapezoidal profile; the cost is time plus acceleration and steering-rate
+smoothness plus deviation from the warm start (``refine:`` in configs/planning.yaml,
+:class:`RefineConfig`).
 
 The result is sampled every ``output_step_m`` of travel (exact on the solution's arcs),
 with speed (>= 0, 0 at each segment end), steering-wheel angle (deg) and time (s), and
@@ -187,7 +188,7 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
     # rounds below still hold the margin between knots
     d_min = np.full(n + 1, lim.d_min)
     if obstacles:
-        clr = geometry.clearance(ws.poses, geom, obstacles, cutoff=lim.d_min + 1.0)
+        clr = geometry.clearance(ws.poses, geom, obstacles, cutoff=lim.d_min)  # exact below
         d_min = np.minimum(d_min, np.maximum(margin, clr))
     detail: dict = {"intervals": n, "obstacles": len(terms), "iterations": 0, "repairs": 0}
     sol = None
@@ -200,7 +201,9 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         if sol is not None:
             rewarm(terms, sol.poses, geom)
         planes = scene.map_planes() if getattr(scene, "map_outline", None) else None
-        sol = solve_segment(ws, terms, scene.bounds, geom, lim, cfg, left, d_min, sol, planes)
+        sol = solve_segment(
+            ws, terms, scene.bounds, geom, lim, cfg, cfg.cpu_time_s, d_min, sol, planes
+        )
         detail.update(iterations=detail["iterations"] + sol.iterations, status=sol.status)
         detail["duration_s"] = round(n * sol.h, 3)
         if not sol.success:
@@ -235,7 +238,7 @@ def _short_intervals(out: Segment, h: float, n: int, obstacles, geom, pcfg, marg
         return {}
     step, dh = pcfg.dense.max_step_m, math.radians(pcfg.dense.max_dheading_deg)
     dense = geometry.densify(np.column_stack([out.poses, out.t]), step, dh)
-    clr = geometry.clearance(dense[:, :3], geom, obstacles, cutoff=1.0)
+    clr = geometry.clearance(dense[:, :3], geom, obstacles, cutoff=margin)  # exact below
     bad = np.flatnonzero(clr < margin)
     k = np.clip(np.floor(dense[bad, 3] / h + 1e-9).astype(int), 0, n - 1)
     short: dict[int, float] = {}

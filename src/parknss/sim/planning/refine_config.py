@@ -70,7 +70,14 @@ class RefineConfig(StrictModel):
     # solver
     max_iter: int = Field(300, ge=1, description="IPOPT iterations per gear segment")
     cpu_time_s: float = Field(
-        30.0, gt=0.0, description="IPOPT CPU-time guard, whole path, s (max_iter binds)"
+        30.0,
+        gt=0.0,
+        description="CPU-time guard of each IPOPT solve and of the whole path, s (max_iter binds)",
+    )
+    program_cache_size: int = Field(
+        16,
+        ge=0,
+        description="segment programs kept built, by structure, ~3 MiB each (0: build every solve)",
     )
     tol: float = Field(1e-6, gt=0.0, description="IPOPT convergence tolerance")
     mu_strategy: Literal["adaptive", "monotone"] = Field("adaptive", description="IPOPT barrier")

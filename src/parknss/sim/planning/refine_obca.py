@@ -151,9 +151,17 @@ def obstacle_terms(
     if not len(interior):
         return terms
     fp = geometry.footprints(poses, geom)
+    cx, cy, r_car = geometry.body_circles(poses, geom)
     for poly in obstacles:
+        # bounding circles first: their gap is a lower bound of the distance, so only
+        # the knots within reach of the circles need the exact distance
+        centre, r_obs = geometry.polygon_circle(poly)
+        cand = np.flatnonzero(np.hypot(cx - centre[0], cy - centre[1]) - r_car - r_obs < reach_m)
+        if not len(cand):
+            continue
         poly = strict_polygon(poly)
-        near = geometry.distance(fp, poly) < reach_m
+        near = np.zeros(n, dtype=bool)
+        near[cand] = geometry.distance(fp[cand], poly) < reach_m
         if window:
             idx = np.flatnonzero(near)
             grown = np.zeros(n, dtype=bool)
