@@ -26,6 +26,32 @@ class ArchConfig(StrictModel):
     tau_init_s: float = Field(0.2, gt=0.0, description="initial first-order time constant")
     tau2_init_s: float = Field(0.1, gt=0.0, description="initial second-order time constant")
     zeta_init: float = Field(0.9, gt=0.0, description="initial second-order damping")
+    # monolag (the monotone structured brake, opt-in; not in the paper's candidate set)
+    monolag_knots: int = Field(8, ge=1, description="ramps of the monotone static map, "
+                               "knots evenly spread over the scaled command domain")
+    monolag_sharpness: float = Field(20.0, gt=0.0, description="softplus sharpness of the "
+                                     "ramps and of the hold's request gate (scaled units)")
+    monolag_max_delay_s: float = Field(0.3, gt=0.0, description="longest dead time, s")
+    monolag_delay_init_s: float = Field(0.1, ge=0.0, description="initial dead time, s")
+    monolag_hold_speed_ms: float = Field(0.07, gt=0.0, description="initial standstill "
+                                         "threshold of the hold gate (state-aware), m/s")
+    monolag_hold_width_ms: float = Field(0.02, gt=0.0, description="width of the hold "
+                                         "gate's speed sigmoid, m/s")
+    monolag_hold_request: float = Field(0.25, gt=0.0, lt=1.0, description="initial request "
+                                        "that arms the hold, fraction of the domain")
+    monolag_hold_tau_s: float = Field(0.3, gt=0.0, description="initial engage time "
+                                      "constant of the hold, s")
+    monolag_release_tau_s: float = Field(0.4, gt=0.0, description="initial release time "
+                                         "constant of the hold, s")
+
+    def artefact_json(self, arch: str) -> dict:
+        """The structure config a chain artefact records for a candidate of ``arch``: the
+        monolag fields only for a monolag candidate, so an artefact of any other
+        architecture is written exactly as before they existed."""
+        doc = self.model_dump(mode="json")
+        if arch != "monolag":
+            doc = {k: v for k, v in doc.items() if not k.startswith("monolag_")}
+        return doc
 
 
 class EnvelopeConfig(StrictModel):

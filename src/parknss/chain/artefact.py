@@ -96,7 +96,7 @@ def _write_chain(out: Path, chain: Chain, cfg: NSSConfig, meta: dict) -> None:
         channels[ch] = {
             "spec": m.spec.name,
             "scaling": m.scaling.to_json(),
-            "arch": m.cfg.model_dump(mode="json"),
+            "arch": m.cfg.artefact_json(m.spec.arch),
         }
     atomic_save_tensors(tensors, out / WEIGHTS)
     doc = {
