@@ -136,8 +136,15 @@ def test_fitted_to_the_reference_brake_its_step_has_the_truths_size_and_speed():
     assert 0.0 <= model.delay_s <= 0.15
 
 
-def test_artefacts_of_other_architectures_omit_the_monolag_fields():
+def test_default_dumps_and_other_artefacts_omit_the_monolag_fields():
+    """The config digests (run folders, the derived store) and the artefacts of the other
+    architectures read as before monolag existed; a changed monolag value is dumped."""
     cfg = ArchConfig()
+    assert not any(k.startswith("monolag_") for k in cfg.model_dump(mode="json"))
     assert not any(k.startswith("monolag_") for k in cfg.artefact_json("narx1s"))
     assert cfg.artefact_json("monolag")["monolag_knots"] == cfg.monolag_knots
     assert ArchConfig.model_validate(cfg.artefact_json("lag2")) == cfg
+    changed = ArchConfig(monolag_knots=4)
+    assert changed.model_dump()["monolag_knots"] == 4
+    assert changed.digest() != cfg.digest()
+    assert ArchConfig.model_validate(changed.model_dump()) == changed

@@ -9,7 +9,7 @@ budgets, split, shortlist size) is a named value here, with the reason in docs/a
 
 from __future__ import annotations
 
-from pydantic import Field
+from pydantic import Field, model_serializer
 
 from parknss.config import StrictModel, load_config
 
@@ -44,14 +44,25 @@ class ArchConfig(StrictModel):
     monolag_release_tau_s: float = Field(0.4, gt=0.0, description="initial release time "
                                          "constant of the hold, s")
 
-    def artefact_json(self, arch: str) -> dict:
-        """The structure config a chain artefact records for a candidate of ``arch``: the
-        monolag fields only for a monolag candidate, so an artefact of any other
-        architecture is written exactly as before they existed."""
-        doc = self.model_dump(mode="json")
-        if arch != "monolag":
-            doc = {k: v for k, v in doc.items() if not k.startswith("monolag_")}
+    @model_serializer(mode="wrap")
+    def _omit_default_monolag(self, handler) -> dict:
+        """Dump without the monolag fields at their defaults, so every config digest
+        (run folders, the derived store's ladder entries) and every artefact of the paper's
+        candidates reads as before they existed; a changed one is dumped (and digested)."""
+        doc = handler(self)
+        for k, f in type(self).model_fields.items():
+            if k.startswith("monolag_") and getattr(self, k) == f.default:
+                doc.pop(k, None)
         return doc
+
+    def artefact_json(self, arch: str) -> dict:
+        """The structure config a chain artefact records for a candidate of ``arch``: every
+        monolag field for a monolag candidate, none for the others (written as before)."""
+        doc = self.model_dump(mode="json")
+        if arch == "monolag":
+            return {**doc, **{k: getattr(self, k) for k in type(self).model_fields
+                              if k.startswith("monolag_")}}
+        return {k: v for k, v in doc.items() if not k.startswith("monolag_")}
 
 
 class EnvelopeConfig(StrictModel):
