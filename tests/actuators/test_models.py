@@ -126,7 +126,7 @@ def test_every_architecture_name_has_one_implementation():
         assert cls.fit_family in ("linear", "neural")
         assert callable(cls.stepper_cls)
     assert {a for a, c in CANDIDATES.items() if c.fit_family == "linear"} == {
-        "lag1", "lag2", "static"}
+        "lag1", "lag2", "static", "monolag"}
 
 
 def test_bad_specs_are_one_line_errors():

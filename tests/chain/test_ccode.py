@@ -130,3 +130,39 @@ def test_c_tanh_is_within_1_4_ulp_and_odd(chains):
     assert list(y[np.isinf(x)]) == [1.0, -1.0, -1.0, 1.0]
     assert np.all(np.abs(y[np.abs(x) >= 19.1]) == 1.0)
     assert np.isnan(y[np.isnan(x)]).all()
+
+
+def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_refuse_it(
+        actuator_campaign, actuator_nss, tmp_path):
+    """The monotone brake (opt-in candidate) travels in the artefact (its structure
+    config with it) and steps identically after loading; the generated C and the ONNX
+    step have no template for it and refuse the chain in one line."""
+    from parknss.chain import load_chain
+    from parknss.chain.ccode import chain_c_source
+    from parknss.chain.deployed import save_chain
+    from parknss.chain.model import NSSProvenance
+    from parknss.errors import CheckpointError
+    from parknss.export.onnx_step import ChainStep
+
+    camp = list(actuator_campaign)
+    nss, ncfg = actuator_nss
+    cfg = tiny_config()
+    env = identify_envelope(camp, cfg.envelope)
+    names = {"drive": "drive/lag1/cmd", "brake": "brake/monolag/phys",
+             "steering": "steering/lag1/cmd"}
+    models = {ch: fit_candidate(CandidateSpec.parse(n), camp[:3], cfg, env)[0]
+              for ch, n in names.items()}
+    chain = make_chain(nss, models, env, NSSProvenance(ncfg, {}))
+    dep = load_chain(save_chain(tmp_path / "chain", chain, {}))
+    assert dep.chain.model("brake").spec.name == "brake/monolag/phys"
+    tr = camp[0]
+    cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd")).copy()
+    x0 = [tr["vx"][0], tr["yaw_rate"][0]]
+    y0 = [tr["torque"][0], tr["brake_pressure"][0], tr["steer"][0]]
+    a = _replay(DeployedChain(chain).rt, cm, x0, y0)
+    b = _replay(dep.rt, cm, x0, y0)
+    assert np.max(np.abs(a - b)) < 1e-12
+    for make in (chain_c_source, ChainStep):
+        with pytest.raises(CheckpointError, match=r"no (C|ONNX) template") as ei:
+            make(dep.rt)
+        assert "\n" not in str(ei.value)

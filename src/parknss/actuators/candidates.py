@@ -15,6 +15,7 @@ import torch
 from parknss.actuators.config import ArchConfig
 from parknss.actuators.lags import Hammerstein, Lag1, Lag2, Static
 from parknss.actuators.models import ActuatorModel, Scaling
+from parknss.actuators.monotone import MonoLag
 from parknss.actuators.neural import NARX, GRUModel, LSTMModel
 from parknss.actuators.spec import CandidateSpec
 
@@ -27,6 +28,7 @@ CANDIDATES: dict[str, type[ActuatorModel]] = {
     "narx1s": NARX,  # the 1 s window (cfg.narx_long_lags)
     "gru": GRUModel,
     "lstm": LSTMModel,
+    "monolag": MonoLag,  # opt-in: the monotone structured brake
 }
 
 

@@ -9,7 +9,7 @@ budgets, split, shortlist size) is a named value here, with the reason in docs/a
 
 from __future__ import annotations
 
-from pydantic import Field
+from pydantic import Field, model_serializer
 
 from parknss.config import StrictModel, load_config
 
@@ -26,6 +26,43 @@ class ArchConfig(StrictModel):
     tau_init_s: float = Field(0.2, gt=0.0, description="initial first-order time constant")
     tau2_init_s: float = Field(0.1, gt=0.0, description="initial second-order time constant")
     zeta_init: float = Field(0.9, gt=0.0, description="initial second-order damping")
+    # monolag (the monotone structured brake, opt-in; not in the paper's candidate set)
+    monolag_knots: int = Field(8, ge=1, description="ramps of the monotone static map, "
+                               "knots evenly spread over the scaled command domain")
+    monolag_sharpness: float = Field(20.0, gt=0.0, description="softplus sharpness of the "
+                                     "ramps and of the hold's request gate (scaled units)")
+    monolag_max_delay_s: float = Field(0.3, gt=0.0, description="longest dead time, s")
+    monolag_delay_init_s: float = Field(0.1, ge=0.0, description="initial dead time, s")
+    monolag_hold_speed_ms: float = Field(0.07, gt=0.0, description="initial standstill "
+                                         "threshold of the hold gate (state-aware), m/s")
+    monolag_hold_width_ms: float = Field(0.02, gt=0.0, description="width of the hold "
+                                         "gate's speed sigmoid, m/s")
+    monolag_hold_request: float = Field(0.25, gt=0.0, lt=1.0, description="initial request "
+                                        "that arms the hold, fraction of the domain")
+    monolag_hold_tau_s: float = Field(0.3, gt=0.0, description="initial engage time "
+                                      "constant of the hold, s")
+    monolag_release_tau_s: float = Field(0.4, gt=0.0, description="initial release time "
+                                         "constant of the hold, s")
+
+    @model_serializer(mode="wrap")
+    def _omit_default_monolag(self, handler) -> dict:
+        """Dump without the monolag fields at their defaults, so every config digest
+        (run folders, the derived store's ladder entries) and every artefact of the paper's
+        candidates reads as before they existed; a changed one is dumped (and digested)."""
+        doc = handler(self)
+        for k, f in type(self).model_fields.items():
+            if k.startswith("monolag_") and getattr(self, k) == f.default:
+                doc.pop(k, None)
+        return doc
+
+    def artefact_json(self, arch: str) -> dict:
+        """The structure config a chain artefact records for a candidate of ``arch``: every
+        monolag field for a monolag candidate, none for the others (written as before)."""
+        doc = self.model_dump(mode="json")
+        if arch == "monolag":
+            return {**doc, **{k: getattr(self, k) for k in type(self).model_fields
+                              if k.startswith("monolag_")}}
+        return {k: v for k, v in doc.items() if not k.startswith("monolag_")}
 
 
 class EnvelopeConfig(StrictModel):

@@ -53,6 +53,7 @@ def _affine_init(model: ActuatorModel, d: ChannelData) -> None:
     A = np.column_stack([cs, np.ones_like(cs), fs.reshape(len(cs), -1)])
     sol, *_ = np.linalg.lstsq(A, ys, rcond=None)
     model.init_affine(sol[0], sol[1], sol[2:])
+    model.init_samples(cs, fs.reshape(len(cs), -1), ys)
 
 
 def fit_candidate(

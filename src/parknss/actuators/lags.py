@@ -28,6 +28,20 @@ from parknss.actuators.steppers import Lag1Stepper, Lag2Stepper, StaticStepper
 from parknss.nss.nets import tanh_mlp
 
 
+def lag2_discrete(log_tau2: Tensor, log_zeta: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+    """(A (2, 2), Bv (2,)) of the zero-order-hold exact second-order lag
+    p'' = ω²(t - p) - 2ζω p', ω = exp(-log_tau2), ζ = exp(log_zeta), state [p, p']."""
+    w = torch.exp(-log_tau2)
+    z = torch.exp(log_zeta)
+    zero = torch.zeros((), dtype=w.dtype)
+    one = torch.ones((), dtype=w.dtype)
+    row0 = torch.stack([zero, one, zero])
+    row1 = torch.stack([-w * w, -2.0 * z * w, w * w])
+    m = torch.stack([row0, row1, torch.zeros(3, dtype=w.dtype)]) * dt
+    e = torch.linalg.matrix_exp(m)
+    return e[:2, :2], e[:2, 2]
+
+
 class _Affine(ActuatorModel):
     """The shared target t = k·c̃ + b + w·f̃."""
 
@@ -146,15 +160,7 @@ class Lag2(_Affine):
 
     def discrete(self) -> tuple[Tensor, Tensor]:
         """(A (2, 2), Bv (2,)) of x[k+1] = A x[k] + Bv t[k], x = [p, p']."""
-        w = torch.exp(-self.log_tau2)
-        z = torch.exp(self.log_zeta)
-        zero = torch.zeros((), dtype=w.dtype)
-        one = torch.ones((), dtype=w.dtype)
-        row0 = torch.stack([zero, one, zero])
-        row1 = torch.stack([-w * w, -2.0 * z * w, w * w])
-        m = torch.stack([row0, row1, torch.zeros(3, dtype=w.dtype)]) * self.dt
-        e = torch.linalg.matrix_exp(m)
-        return e[:2, :2], e[:2, 2]
+        return lag2_discrete(self.log_tau2, self.log_zeta, self.dt)
 
     def rollout(self, cmd, feat, y0):
         c = self.sc_cmd(cmd)

@@ -126,6 +126,10 @@ class ActuatorModel(nn.Module):
     def init_affine(self, k: float, b: float, w: np.ndarray) -> None:
         """Start from the static least-squares map ỹ = k·c̃ + b + w·f̃ (scaled units)."""
 
+    def init_samples(self, cs: np.ndarray, fs: np.ndarray, ys: np.ndarray) -> None:
+        """Refine the start from the scaled training samples (command (N,), features (N, F),
+        actual (N,)) after :meth:`init_affine`; nothing by default."""
+
     # interface (subclasses implement)
     def rollout(self, cmd: Tensor, feat: Tensor | None, y0: Tensor) -> Tensor:
         raise NotImplementedError

@@ -33,7 +33,10 @@ CHANNEL_INDEX: dict[str, int] = {c: i for i, c in enumerate(CHANNELS)}
 VARIANTS: tuple[str, ...] = ("cmd", "phys", "uniform")
 CORE_ARCHS: tuple[str, ...] = ("lag1", "lag2", "hammerstein", "narx", "gru")
 LONG_ARCHS: tuple[str, ...] = ("narx1s", "lstm")  # long-memory brake candidates
-ALL_ARCHS: tuple[str, ...] = (*CORE_ARCHS, *LONG_ARCHS, "static")
+# Opt-in structured candidates: never fitted by Phase A unless named in select.archs
+# (so the study's stored results stay valid); ``monolag`` is the monotone brake.
+STRUCTURED_ARCHS: tuple[str, ...] = ("monolag",)
+ALL_ARCHS: tuple[str, ...] = (*CORE_ARCHS, *LONG_ARCHS, "static", *STRUCTURED_ARCHS)
 
 # State-feature names per (channel, variant); "speed" is |vx|.
 FEATURES: dict[tuple[str, str], tuple[str, ...]] = {

@@ -193,3 +193,67 @@ class LSTMStepper(GRUStepper):
         self.c = fg * self.c + i * gg
         self.h = o * np.tanh(self.c)
         return (float(self.Wo @ self.h) + self.bo) * self.y_sc + self.y_off
+
+
+def _softplus(x: float) -> float:
+    return float(np.logaddexp(x, 0.0))
+
+
+class MonoLagStepper(Stepper):
+    """The monotone brake (:mod:`parknss.actuators.monotone`): the static map's last D + 1
+    values in a doubled ring buffer, the hold filter, the lag's position and rate."""
+
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        p = self.p
+        self.d = float(p["direction"])
+        self.beta = model.beta
+        self.knots = p["knots"]
+        self.w = np.logaddexp(p["rho"], 0.0)
+        self.b = float(p["b"])
+        self.n = model.max_delay + 1
+        self.lam = model.delay_kernel().detach().numpy().astype(np.float64)
+        A, Bv = model.discrete()
+        self.A = A.detach().numpy().astype(np.float64)
+        self.Bv = Bv.detach().numpy().astype(np.float64)
+        self.hold = model.hold
+        if self.hold:
+            self.idx = model.speed_idx
+            self.H = _softplus(float(p["rho_hold"]))
+            self.r_h = float(p["r_hold"])
+            self.v_h = math.exp(float(p["log_v_hold"]))
+            self.v_w = model.v_width
+            self.a_on = math.exp(-self.dt * math.exp(-float(p["log_tau_hold"])))
+            self.a_off = math.exp(-self.dt * math.exp(-float(p["log_tau_release"])))
+        self.buf = np.zeros(2 * self.n)
+        self.i = 0
+        self.gf = self.pos = self.rate = 0.0
+
+    def static_map(self, r: float) -> float:
+        ramps = np.logaddexp(self.beta * (r - self.knots), 0.0) / self.beta
+        return self.b + float(np.sum(ramps * self.w))
+
+    def reset(self, c0: float, y0: float) -> None:
+        self.buf[:] = self.static_map(self.d * (c0 - self.c_off) / self.c_sc)
+        self.i = 0
+        self.gf, self.pos, self.rate = 0.0, (y0 - self.y_off) / self.y_sc, 0.0
+
+    def step(self, c: float, f=None) -> float:
+        r = self.d * (c - self.c_off) / self.c_sc
+        m = self.static_map(r)
+        self.buf[self.i] = self.buf[self.i + self.n] = m
+        self.i = (self.i + 1) % self.n
+        t = float(np.sum(self.buf[self.i : self.i + self.n] * self.lam))
+        if self.hold:
+            t = max(t, self.b + self.H * self.gf)
+            speed = 0.0 if f is None else abs(float(f[self.idx]))
+            g = (1.0 / (1.0 + math.exp(-self.beta * (r - self.r_h)))) * (
+                1.0 / (1.0 + math.exp(-(self.v_h - speed) / self.v_w)))
+            a = self.a_on if g > self.gf else self.a_off
+            self.gf = a * self.gf + (1.0 - a) * g
+        (a00, a01), (a10, a11) = self.A
+        p, q = self.pos, self.rate
+        out = p * self.y_sc + self.y_off
+        self.pos = a00 * p + a01 * q + self.Bv[0] * t
+        self.rate = a10 * p + a11 * q + self.Bv[1] * t
+        return out

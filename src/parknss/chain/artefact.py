@@ -55,7 +55,7 @@ from parknss.nss.checkpoint import (
 )
 from parknss.nss.config import NSSConfig
 from parknss.outputs import artefact_folder
-from parknss.signals import SCHEMA_VERSION
+from parknss.signals import DT, SCHEMA_VERSION
 
 FORMAT = "parknss-chain"
 FORMAT_VERSION = 1
@@ -96,7 +96,7 @@ def _write_chain(out: Path, chain: Chain, cfg: NSSConfig, meta: dict) -> None:
         channels[ch] = {
             "spec": m.spec.name,
             "scaling": m.scaling.to_json(),
-            "arch": m.cfg.model_dump(mode="json"),
+            "arch": m.cfg.artefact_json(m.spec.arch),
         }
     atomic_save_tensors(tensors, out / WEIGHTS)
     doc = {
@@ -172,6 +172,9 @@ def _check_sizes(arch: ArchConfig, where: str) -> None:
         check_size(f"arch.{name}", getattr(arch, name), MAX_UNITS, src)
     for name in ("narx_lags", "narx_long_lags"):
         check_size(f"arch.{name}", getattr(arch, name), MAX_LAGS, src)
+    check_size("arch.monolag_knots", arch.monolag_knots, MAX_UNITS, src)
+    check_size("arch.monolag_max_delay_s samples", round(arch.monolag_max_delay_s / DT),
+               MAX_LAGS, src)
 
 
 def _load_weights(doc: dict, folder: Path, models: dict[str, ActuatorModel]) -> None:
