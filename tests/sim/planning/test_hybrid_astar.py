@@ -164,3 +164,17 @@ def test_planning_config_file_and_errors(tmp_path):
     bad.write_text("search: sideways\n")
     with pytest.raises(ConfigError, match="search"):
         load_planning_config(bad)
+
+
+def test_tie_keys_equal_within_noise_and_order_otherwise():
+    """Costs equal up to a moved scene's last bits share a key (the search then takes
+    them in insertion order, the same in every frame); different costs keep their order."""
+    from parknss.sim.planning.hybrid_astar import tie_key
+
+    q = PlanningConfig().tie_quantum
+    assert q > 0
+    a = 0.1 + 0.2  # 0.30000000000000004
+    assert a != 0.3 and tie_key(a, q) == tie_key(0.3, q)
+    assert tie_key(17.7 * (1 + 1e-15), q) == tie_key(17.7, q)
+    assert tie_key(17.7, q) < tie_key(17.7 + 10 * q, q)
+    assert tie_key(1.5, 0.0) == 1.5  # 0: raw floats
