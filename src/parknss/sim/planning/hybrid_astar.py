@@ -46,7 +46,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
@@ -99,6 +99,11 @@ class PlanningConfig(StrictModel):
     steer_cost: float = Field(0.1, ge=0.0, description="cost per metre at full lock")
     steer_change_cost: float = Field(0.2, ge=0.0, description="cost per lock-to-centre change")
     heuristic_weight: float = Field(2.0, ge=1.0)
+    retry_weights: tuple[Annotated[float, Field(ge=1.0)], ...] = Field(
+        (3.0,),
+        description="a search that exhausts max_expansions runs again with each of these "
+        "heuristic weights in turn (each with max_expansions more), within time_budget_s",
+    )
     holonomic_resolution_m: float = Field(0.25, gt=0.0)
     field_resolution_m: float = Field(0.05, gt=0.0, description="distance-field grid, m")
     field_tolerance_m: float = Field(0.01, ge=0.0, description="interpolation allowance, m")
@@ -160,6 +165,7 @@ class PlanStats:
     """Counters and timings of one plan (s)."""
 
     expansions: int = 0
+    attempts: int = 0  # searches run: 1 + the retries with a greedier weight
     nodes: int = 0
     connections_tried: int = 0
     rs_checked: int = 0
@@ -328,7 +334,14 @@ class HybridAStar:
             self._world = scene
             canon = CanonicalScene.of(scene, self.cfg.canonical_frame)
             self._canon = canon
-            result = self._plan(canon, stats, t0)
+            for w in (self.cfg.heuristic_weight, *self.cfg.retry_weights):
+                self._w = w
+                stats.attempts += 1
+                result = self._plan(canon, stats, t0)
+                if result.reason != "expansion budget exhausted":
+                    break
+            if stats.attempts > 1:
+                result.detail += f" (heuristic weight {self._w:g}, search {stats.attempts})"
             if result.trajectory is not None:
                 result.trajectory = canon.frame.to_world_trajectory(result.trajectory)
         result.stats = stats
@@ -496,7 +509,7 @@ class HybridAStar:
 
     def _pop(self, tree: _Tree) -> int | None:
         """Pop the best open node (lazy Reeds-Shepp heuristic); None when empty."""
-        w = self.cfg.heuristic_weight
+        w = self._w
         while tree.heap:
             _f, nid = heapq.heappop(tree.heap)
             node = tree.nodes[nid]
@@ -553,7 +566,7 @@ class HybridAStar:
             done = self._connect(tree, nid, other, targets, stats)
             if done is not None:
                 return done
-        w, q = c.heuristic_weight, c.tie_quantum
+        w, q = self._w, c.tie_quantum
         cands = []
         for k, r in enumerate(reach):
             length = float(r) * c.sample_step_m
