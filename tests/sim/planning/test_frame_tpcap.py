@@ -52,7 +52,7 @@ def test_a_moved_tpcap_file_has_the_same_map_in_the_goal_frame(case, tmp_path):
 
 
 @needs_tpcap
-@pytest.mark.parametrize("case", [1, 2, 4])
+@pytest.mark.parametrize("case", [1, 2, 4, 16])  # 16: ties on a grid boundary
 def test_tpcap_cases_moved_plan_the_same(case):
     """Plannability, length to 1e-6 m and cusps of the search under the benchmark's motion
     (the TPCAP car, the paper's 0.10 m margin, the shipped canonical frame)."""
@@ -82,3 +82,22 @@ def test_a_moved_tpcap_case_refines_the_same():
     assert ref.refined and got.refined
     assert got.trajectory.length == pytest.approx(ref.trajectory.length, abs=1e-6)
     assert got.trajectory.cusps == ref.trajectory.cusps
+
+
+@needs_tpcap
+def test_a_search_that_exhausts_its_budget_retries_with_a_greedier_weight():
+    """TPCAP case 19 (38 m from start to goal, a turn-around on the way): at the weight
+    2.0 the trees pass each other in the aisle (found only at 3581 expansions); the retry
+    at ``retry_weights`` 3.0 finds it (203 expansions), within the same budget per try."""
+    geom = load_vehicle_geometry(CONFIG_DIR / "tpcap_vehicle.yaml")
+    loop = override(load_closed_loop_config(), {"plan_margin_m": 0.10}, source="test")
+    scene = read_tpcap(TPCAP / "Case19.csv")
+    base = override(load_planning_config(), {"max_expansions": 250}, source="test")
+    assert base.retry_weights == (3.0,)
+    once = override(base, {"retry_weights": ()}, source="test")
+    miss = plan_scene(scene, loop, once, geom, refine=False)
+    assert miss.trajectory is None and miss.reason == "expansion budget exhausted"
+    assert miss.expansions == 250
+    got = plan_scene(scene, loop, base, geom, refine=False)
+    assert got.trajectory is not None and 250 < got.expansions <= 500
+    assert got.trajectory.cusps >= 1

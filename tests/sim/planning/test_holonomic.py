@@ -74,3 +74,19 @@ def test_the_source_counts_as_free_and_unknown_backends_are_refused():
     assert np.array_equal(grid_dijkstra(free, 1.0, (1, 1)), dist)  # auto: python
     with pytest.raises(ValueError):
         grid_dijkstra(free, 1.0, (1, 1), backend="networkx")
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-12, -1e-12])
+def test_the_lattice_does_not_move_with_float_noise_in_the_bounds(noise):
+    """A moved scene's bounds equal the original's up to float noise: the cells (anchored
+    at the corner rounded to ANCHOR_DIGITS) and so every lookup are the same, also for
+    the goal lying half-way between two cell centres (TPCAP case 16: it fell either side)."""
+    res = 0.25
+    ref = HolonomicGrid([], (-8.0, -7.9, 6.1, 8.0), 0.5, res, 5.0)
+    grid = HolonomicGrid([], (-8.0 + noise, -7.9 - noise, 6.1 + noise, 8.0 - noise), 0.5, res, 5.0)
+    assert (grid.x0, grid.y0) == (ref.x0, ref.y0)
+    assert grid.index(0.0, 0.0) == ref.index(0.0, 0.0)
+    assert (0.0 - ref.x0) / res == 31.5  # the origin on a rounding boundary
+    h, h_ref = grid.heuristic((0.0, 0.0)), ref.heuristic((0.0, 0.0))
+    for x, y in [(3.0 + 1e-13, -2.0), (-5.0, 4.0 - 1e-13), (0.3, -0.7)]:
+        assert h(x, y) == h_ref(x, y)

@@ -20,6 +20,10 @@ import numpy as np
 from parknss.sim.geometry import point_distance
 from parknss.sim.planning.collision_field import CHUNK_POINTS
 
+ANCHOR_DIGITS = 9
+"""Decimal digits (m) the grid's corner is rounded to before the cells are laid out: far
+below any resolution, far above float noise (a rigid motion's last bits, ~1e-12 m)."""
+
 
 class HolonomicGrid:
     """The rear-axle configuration space on a grid, for the holonomic heuristic.
@@ -38,9 +42,13 @@ class HolonomicGrid:
         the map is not (only) ``bounds``."""
         xmin, ymin, xmax, ymax = bounds
         self.res = res
-        self.x0, self.y0 = xmin + 0.5 * res, ymin + 0.5 * res
-        self.nx = max(1, math.floor((xmax - xmin) / res))
-        self.ny = max(1, math.floor((ymax - ymin) / res))
+        # the cells are anchored at the corner rounded to ANCHOR_DIGITS: a moved scene's
+        # corner differs in the last bits, which moved the lattice across a lookup's
+        # rounding boundary (TPCAP case 16: the goal half-way between two centres)
+        ax, ay = round(xmin, ANCHOR_DIGITS), round(ymin, ANCHOR_DIGITS)
+        self.x0, self.y0 = ax + 0.5 * res, ay + 0.5 * res
+        self.nx = max(1, math.floor((xmax - ax) / res))
+        self.ny = max(1, math.floor((ymax - ay) / res))
         xs = self.x0 + res * np.arange(self.nx)
         ys = self.y0 + res * np.arange(self.ny)
         d = np.minimum(

@@ -46,7 +46,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field
@@ -99,6 +99,11 @@ class PlanningConfig(StrictModel):
     steer_cost: float = Field(0.1, ge=0.0, description="cost per metre at full lock")
     steer_change_cost: float = Field(0.2, ge=0.0, description="cost per lock-to-centre change")
     heuristic_weight: float = Field(2.0, ge=1.0)
+    retry_weights: tuple[Annotated[float, Field(ge=1.0)], ...] = Field(
+        (3.0,),
+        description="a search that exhausts max_expansions runs again with each of these "
+        "heuristic weights in turn (each with max_expansions more), within time_budget_s",
+    )
     holonomic_resolution_m: float = Field(0.25, gt=0.0)
     field_resolution_m: float = Field(0.05, gt=0.0, description="distance-field grid, m")
     field_tolerance_m: float = Field(0.01, ge=0.0, description="interpolation allowance, m")
@@ -134,6 +139,12 @@ class PlanningConfig(StrictModel):
         description="cell and heading-bin anchor: the frame's origin sits this fraction "
         "into a cell (0.5: at the centre of its cell and bin)",
     )
+    tie_quantum: float = Field(
+        1e-6, ge=0.0,
+        description="costs, lengths and distances the search orders by are rounded to this "
+        "(m) and equal ones taken in insertion order: a moved scene breaks ties the same "
+        "(0: raw floats)",
+    )
     region_margin_m: float = Field(
         20.0, gt=0.0, description="search region: start/goal box grown by this (doubles), m"
     )
@@ -154,6 +165,7 @@ class PlanStats:
     """Counters and timings of one plan (s)."""
 
     expansions: int = 0
+    attempts: int = 0  # searches run: 1 + the retries with a greedier weight
     nodes: int = 0
     connections_tried: int = 0
     rs_checked: int = 0
@@ -193,6 +205,16 @@ class PlanResult:
 # Search trees
 
 
+def tie_key(value: float, quantum: float) -> float:
+    """``value`` (a cost or length, m) in units of ``quantum`` (0: as is), for ordering.
+
+    Values within float noise of each other (a moved scene's last bits) get the same key,
+    and the search breaks the tie by insertion order, the same in every frame; only a
+    value within noise of a rounding boundary can still differ (odds ~1e-7 per compare
+    at 1e-6 m)."""
+    return float(round(value / quantum)) if quantum > 0 else value
+
+
 @dataclass
 class _Node:
     pose: tuple[float, float, float]
@@ -210,14 +232,17 @@ class _Node:
 class _Tree:
     """One search tree. ``backward``: grown from the goal, search direction = -real."""
 
-    def __init__(self, root: _Node, target, holo: HolonomicHeuristic, backward: bool) -> None:
+    def __init__(
+        self, root: _Node, target, holo: HolonomicHeuristic, backward: bool, quantum: float = 0.0
+    ) -> None:
         self.backward = backward
+        self.quantum = quantum
         self.target = target
         self.holo = holo
         self.nodes = [root]
         self.best: dict[tuple, int] = {root.key: 0}
         self.closed: set[tuple] = set()
-        self.heap: list[tuple[float, int]] = [(0.0, 0)]
+        self.heap: list[tuple[float, int]] = [(0.0, 0)]  # (tie_key(f), node id)
         self.poses = np.zeros((1024, 3))
         self.poses[0] = root.pose
         self.expansions = 0
@@ -229,7 +254,7 @@ class _Tree:
             self.poses = np.concatenate([self.poses, np.zeros_like(self.poses)])
         self.poses[nid] = node.pose
         self.best[node.key] = nid
-        heapq.heappush(self.heap, (f, nid))
+        heapq.heappush(self.heap, (tie_key(f, self.quantum), nid))
 
     def nearest(self, pose, k: int, radius: float) -> list[int]:
         """Up to k node ids closest to ``pose`` (xy distance + radius x heading gap)."""
@@ -237,10 +262,9 @@ class _Tree:
         p = self.poses[:n]
         dth = np.abs((p[:, 2] - pose[2] + np.pi) % (2 * np.pi) - np.pi)
         d = np.hypot(p[:, 0] - pose[0], p[:, 1] - pose[1]) + radius * dth
-        if n <= k:
-            return [int(i) for i in np.argsort(d)]
-        idx = np.argpartition(d, k)[:k]
-        return [int(i) for i in idx[np.argsort(d[idx])]]
+        if self.quantum > 0:  # equal distances in id order, whatever the last bits
+            d = np.round(d / self.quantum)
+        return [int(i) for i in np.argsort(d, kind="stable")[:k]]
 
 
 # ---------------------------------------------------------------------------------------
@@ -310,7 +334,14 @@ class HybridAStar:
             self._world = scene
             canon = CanonicalScene.of(scene, self.cfg.canonical_frame)
             self._canon = canon
-            result = self._plan(canon, stats, t0)
+            for w in (self.cfg.heuristic_weight, *self.cfg.retry_weights):
+                self._w = w
+                stats.attempts += 1
+                result = self._plan(canon, stats, t0)
+                if result.reason != "expansion budget exhausted":
+                    break
+            if stats.attempts > 1:
+                result.detail += f" (heuristic weight {self._w:g}, search {stats.attempts})"
             if result.trajectory is not None:
                 result.trajectory = canon.frame.to_world_trajectory(result.trajectory)
         result.stats = stats
@@ -425,10 +456,12 @@ class HybridAStar:
             )
         trees = []
         if c.search != "from_goal":
-            trees.append(_Tree(self._root(start, clr[0], holo_goal), goal, holo_goal, False))
+            root = self._root(start, clr[0], holo_goal)
+            trees.append(_Tree(root, goal, holo_goal, False, c.tie_quantum))
         if c.search != "from_start":
             holo_start = grid.heuristic(start[:2])
-            trees.append(_Tree(self._root(goal, clr[1], holo_start), start, holo_start, True))
+            root = self._root(goal, clr[1], holo_start)
+            trees.append(_Tree(root, start, holo_start, True, c.tie_quantum))
         stats.setup_time_s += time.perf_counter() - t1
         self._trees = trees
         return self._search(trees, stats, deadline)
@@ -476,7 +509,7 @@ class HybridAStar:
 
     def _pop(self, tree: _Tree) -> int | None:
         """Pop the best open node (lazy Reeds-Shepp heuristic); None when empty."""
-        w = self.cfg.heuristic_weight
+        w = self._w
         while tree.heap:
             _f, nid = heapq.heappop(tree.heap)
             node = tree.nodes[nid]
@@ -492,8 +525,9 @@ class HybridAStar:
                 if h_rs > node.h + 1e-9:
                     node.h = h_rs
                     nf = node.g + w * node.h
-                    if tree.heap and nf > tree.heap[0][0]:
-                        heapq.heappush(tree.heap, (nf, nid))
+                    nk = tie_key(nf, tree.quantum)
+                    if tree.heap and nk > tree.heap[0][0]:
+                        heapq.heappush(tree.heap, (nk, nid))
                         continue
             tree.closed.add(key)
             return nid
@@ -532,7 +566,7 @@ class HybridAStar:
             done = self._connect(tree, nid, other, targets, stats)
             if done is not None:
                 return done
-        w = c.heuristic_weight
+        w, q = self._w, c.tie_quantum
         cands = []
         for k, r in enumerate(reach):
             length = float(r) * c.sample_step_m
@@ -557,7 +591,7 @@ class HybridAStar:
                 continue
             g = node.g + self._move_cost(length, d, kap, node.direction, node.kappa, tree.backward)
             old = tree.best.get(key)
-            if old is not None and tree.nodes[old].g <= g:
+            if old is not None and tie_key(tree.nodes[old].g, q) <= tie_key(g, q):
                 continue
             tree.add(_Node(pose, g, nid, length, d, kap, h, key, float(cl)), g + w * h)
             stats.nodes += 1
@@ -592,7 +626,7 @@ class HybridAStar:
                         cands.append((path.length, m, path))
         if not cands:
             return None
-        cands.sort(key=lambda t: t[0])
+        cands.sort(key=lambda t: tie_key(t[0], c.tie_quantum))  # stable: ties in order
         stats.rs_checked += len(cands)
         ch = self._checker
         # cheap reject on a coarse sampling: corners or obstacle vertices within the margin

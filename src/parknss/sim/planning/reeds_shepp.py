@@ -428,7 +428,7 @@ def all_paths(start, goal, turning_radius: float) -> list[RSPath]:
     st = tuple(float(v) for v in start)
     gl = tuple(float(v) for v in goal)
     paths = [RSPath(st, gl, float(turning_radius), w, p) for w, p in _words(x, y, phi)]
-    paths.sort(key=lambda p: p.length)
+    paths.sort(key=lambda p: round(p.length, 9))  # stable: equal lengths in word order
     return paths
 
 
