@@ -86,8 +86,10 @@ RESULTS = Path(__file__).resolve().parents[2] / "results"
 LIGHT_COMMANDS = {
     # a command that runs (not only its --help) -> the heavy modules it may import
     "--version": (),
-    # the store's listing reads JSON; parked training states are checked without torch
-    "results list --json --store {results}": (),
+    # the store's listing reads JSON; parked training states are checked without torch;
+    # whether a derived entry (Table V cell, ladder, rating) is current is computed from
+    # what it reads (NumPy, no torch)
+    "results list --json --store {results}": ("numpy",),
     # planning needs CasADi, the figure matplotlib (not pyplot); a scene's heuristic grid
     # is small enough for the plain-Python Dijkstra, the closed-loop configs need no
     # scipy.linalg: no SciPy at all

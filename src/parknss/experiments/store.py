@@ -605,9 +605,12 @@ def entries(root: str | Path) -> list[tuple[Path, StoreEntry | str]]:
 def results_root(option: str | Path | None, config: Path | None = None) -> Path:
     """The store ``parknss results`` reads (:func:`store_dir` with the experiments config
     ``config``); a one-line ConfigError when there is none or it is not a folder."""
-    from parknss.experiments.config import load_experiments_config
+    if option is not None or os.environ.get(ENV_VAR):  # the config is not read (start-up)
+        root = store_dir(option)
+    else:
+        from parknss.experiments.config import load_experiments_config
 
-    root = store_dir(option, load_experiments_config(config).store.dir)
+        root = store_dir(option, load_experiments_config(config).store.dir)
     if root is None:
         raise ConfigError("no result store (off, or no checkout): name one with --store DIR "
                           f"or ${ENV_VAR}")
