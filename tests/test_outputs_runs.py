@@ -7,6 +7,7 @@ First :func:`parknss.outputs.run_folder` itself, then one test per command."""
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from helpers.synth import make_campaign
 from parknss.cli import main
 from parknss.config import SHIPPED_CHAIN, SHIPPED_NSS
 from parknss.data.io import write_campaign
+from parknss.errors import ParknssWarning
 from parknss.nss.checkpoint import save_model
 from parknss.outputs import (
     RUN_MANIFEST,
@@ -135,6 +137,10 @@ def test_overwrite_replaces_and_a_failing_run_puts_the_earlier_content_back(tmp_
         run.write_text("grid_36_cells.csv", "half")
         raise RuntimeError(BOOM)
     assert _snapshot(out) == before and _leftovers(tmp_path) == []
+    # the failed run's own work is kept beside it, never deleted (see the test below)
+    (kept,) = tmp_path.glob("x.unfinished-*")
+    assert (kept / "grid_36_cells.csv").read_text() == "half"
+    shutil.rmtree(kept)
     with run_folder(out, command="parknss grid", args={}, overwrite=True) as run:
         run.write_text("grid_36.json", "{}")
     assert sorted(_snapshot(out)) == ["grid_36.json", RUN_MANIFEST]
@@ -183,9 +189,42 @@ def test_a_killed_overwrite_is_rolled_back_by_the_next_look(tmp_path, finished):
         pass
     if finished:  # the killed run had finished: it stays, the earlier model goes
         assert read_manifest(out)["command"] == "parknss tune"
+        assert list(tmp_path.glob("x.unfinished-*")) == []
     else:
         assert _snapshot(out) == before
+        (kept,) = tmp_path.glob("x.unfinished-*")  # the killed run's work, kept
+        assert (kept / "tune.json").read_text() == "{}"
     assert _leftovers(tmp_path) == []
+
+
+def test_an_unfinished_overwrite_keeps_its_training_state_and_resumes_there(tmp_path):
+    """An --overwrite run that fails after hours of fitting must not lose its resumable
+    state when the earlier content is put back: the state moves to a visible sibling,
+    a one-line warning names it, and the same command with --out there resumes it."""
+    out = tmp_path / "floor"
+    args = {"config": "f2.yaml"}
+    with run_folder(out, command="parknss study seed-noise", args=args,
+                    overwrite=False) as run:
+        run.write_text("seed_noise.json", "{}")
+    before = _snapshot(out)
+    with (pytest.warns(ParknssWarning, match=r"this run's work is kept in .*floor\.unfinished-"),
+          pytest.raises(ValueError, match="schema"),
+          run_folder(out, command="parknss study seed-noise", args=args,
+                     overwrite=True) as run):
+        run.write_text("state/fit/train_state.json", '{"epoch": 3000}')
+        raise ValueError("schema changed under the running fit")
+    assert _snapshot(out) == before and _leftovers(tmp_path) == []
+    (kept,) = tmp_path.glob("floor.unfinished-*")
+    assert json.loads((kept / "state/fit/train_state.json").read_text())["epoch"] == 3000
+    with run_folder(kept, command="parknss study seed-noise", args=args,
+                    overwrite=False) as run:
+        assert run.state == "resumed"
+    # a replacing run that wrote nothing but its manifest leaves nothing beside
+    with (pytest.raises(ValueError),
+          run_folder(out, command="parknss other", args={}, overwrite=True)):
+        raise ValueError("early")
+    assert _snapshot(out) == before
+    assert [p.name for p in tmp_path.glob("floor.unfinished-*")] == [kept.name]
 
 
 def test_atomic_files_keep_the_earlier_file_and_stale_ones_are_tidied(tmp_path):

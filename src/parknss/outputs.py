@@ -50,7 +50,9 @@ and the start and finish times. Then:
   ``out``, and the earlier content is deleted only when the run finishes; a run that
   fails puts it back whole, and one that is killed leaves it beside ``out`` for the next
   look at ``out`` to put back (:func:`recover_stale`: the killed run's manifest has no
-  finish time).
+  finish time). Either way the unfinished run's own work (a result cache, training
+  states, partial products) is never deleted: it moves to ``<name>.unfinished-<UTC>``
+  beside ``out`` with a one-line warning, and ``--out`` there resumes it.
 
 Every final product is written atomically (:func:`atomic_file`: a temporary sibling
 renamed over the target), so a failing or killed run never leaves a torn table, JSON or
@@ -108,6 +110,7 @@ import shutil
 import subprocess
 import tempfile
 import unicodedata
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -115,7 +118,7 @@ from pathlib import Path
 from typing import Any
 
 from parknss import durable
-from parknss.errors import ParknssError
+from parknss.errors import ParknssError, ParknssWarning
 
 MARKERS: tuple[tuple[str, str], ...] = (
     ("campaign.json", "campaign"),
@@ -355,7 +358,8 @@ def recover_stale(out: str | Path) -> None:
     """Tidy what a killed writer of ``out`` left beside it: put back an old artefact
     renamed away (``.<name>.old-<pid>``) when ``out`` is missing; put back the earlier
     content a killed ``--overwrite`` run replaced (``.<name>.replaced-<pid>``) unless that
-    run finished; delete the rest."""
+    run finished (the killed run's work, if any, kept by :func:`_set_aside`); delete the
+    rest."""
     out = Path(out)
     parent = out.absolute().parent
     if not parent.is_dir():
@@ -366,12 +370,42 @@ def recover_stale(out: str | Path) -> None:
             if not pid.isdigit() or _alive(int(pid)):
                 continue
             if kind == "replaced" and not (read_manifest(out) or {}).get("finished_utc"):
-                _remove(out)  # the killed run's partial folder, if it got that far
+                kept = _set_aside(out)  # the killed run's folder, if it got that far
                 os.replace(p, out)
+                if kept is not None:
+                    warnings.warn(f"{out}: a killed --overwrite run's work is kept in "
+                                  f"{kept} (resume it with --out {kept}); the earlier "
+                                  "content is put back", ParknssWarning, stacklevel=2)
             elif kind == "old" and not out.exists() and not out.is_symlink():
                 os.replace(p, out)
             else:
                 _remove(p)
+
+
+UNFINISHED = "unfinished"
+"""Suffix of the folder an unfinished ``--overwrite`` run's work is kept in
+(``<name>.unfinished-<UTC>``) when the earlier content is put back."""
+
+
+def _set_aside(out: Path) -> Path | None:
+    """Clear ``out`` for the earlier content an unfinished ``--overwrite`` run replaced:
+    a run that wrote work beyond its manifest (a result cache, training states, partial
+    products) is moved to a visible sibling ``<name>.unfinished-<UTC>``, whose manifest
+    resumes it with ``--out`` there (its path returned); an empty one is removed."""
+    if not out.is_dir() or out.is_symlink():
+        _remove(out)
+        return None
+    if not any(p.name != RUN_MANIFEST for p in out.iterdir()):
+        _remove(out)
+        return None
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    kept = out.absolute().parent / f"{out.name}.{UNFINISHED}-{stamp}"
+    n = 1
+    while kept.exists() or kept.is_symlink():
+        n += 1
+        kept = out.absolute().parent / f"{out.name}.{UNFINISHED}-{stamp}-{n}"
+    os.replace(out, kept)
+    return kept
 
 
 def _remove(path: Path) -> None:
@@ -599,8 +633,12 @@ def _unclaim(out: Path, created: Path | None) -> None:
     _remove_empty(out.absolute(), created)
 
 
-def _run_note(out: Path, state: str) -> str:
+def _run_note(out: Path, state: str, kept: Path | None = None) -> str:
     """What an interrupted run keeps in ``out`` and how to resume it, for one line."""
+    if state == "replacing" and kept is not None:
+        return (f"the earlier content of {out} is put back; this run's work is kept in "
+                f"{kept}: run the same command with --out {kept} (without --overwrite) to "
+                "resume it")
     if state == "replacing":
         return f"the earlier content of {out} is put back; run the same command again"
     if not (out / RUN_MANIFEST).is_file():
@@ -712,14 +750,17 @@ def run_folder(
             write_text_atomic(out / RUN_MANIFEST, json.dumps(manifest, indent=2))
         yield run
     except BaseException as exc:
+        kept = None
         if state == "replacing":
-            _remove(out)
+            kept = _set_aside(out)
             os.replace(replaced, out)
         elif state == "new" and _disk_full(exc):
             _drop_partial(out, created)
         elif state == "new" and [p.name for p in out.iterdir()] in ([RUN_MANIFEST], []):
             _unclaim(out, created)
-        _note_interrupt(exc, lambda: _run_note(out, state))
+        if kept is not None and not isinstance(exc, KeyboardInterrupt):
+            warnings.warn(_run_note(out, state, kept), ParknssWarning, stacklevel=2)
+        _note_interrupt(exc, lambda: _run_note(out, state, kept))
         raise
     run.manifest["finished_utc"] = _now()
     write_text_atomic(out / RUN_MANIFEST, json.dumps(run.manifest, indent=2, default=str))
