@@ -43,7 +43,7 @@ from typing import Any
 
 from parknss import durable
 from parknss.errors import CheckpointError
-from parknss.nss import state_files as train_state
+from parknss.nss import state_files
 from parknss.nss.state_files import FORMAT, META
 
 INFLIGHT = "inflight"
@@ -76,14 +76,18 @@ class StateInfo:
         return f"{self.name:<40} step {self.step:>6}  cpu {cpu:>6} s"
 
 
+def _write_json(path: Path, doc: Any) -> None:
+    """Write ``doc`` as sorted, indented JSON to ``path`` durably."""
+    durable.write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+
+
 def label(folder: str | Path, fn: str, kwargs: Mapping[str, Any], name: str, key: str) -> None:
     """Write ``job.json`` into the state ``folder`` (created): which job, under which store
     key, fits there."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     doc = {"fn": fn, "kwargs": dict(kwargs), "name": name, "key": key}
-    durable.write_bytes(folder / JOB_FILE,
-                        (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+    _write_json(folder / JOB_FILE, doc)
 
 
 def read_step(folder: Path) -> int | None:
@@ -113,7 +117,7 @@ def read_info(folder: Path) -> StateInfo:
         step, wall = int(meta["epoch"]), float(meta["wall_s"])
         cpu = None if meta.get("cpu_s") is None else float(meta["cpu_s"])
         sha = meta["sha256"]
-        tensors = folder / train_state.tensors_name(meta)
+        tensors = folder / state_files.tensors_name(meta)
     except FileNotFoundError as exc:
         raise CheckpointError(f"{folder}: no training state written yet") from exc
     except (OSError, ValueError, KeyError, TypeError, AttributeError, CheckpointError) as exc:
@@ -126,7 +130,7 @@ def read_info(folder: Path) -> StateInfo:
 def copy_state(src: Path, dst: Path) -> StateInfo:
     """Copy the labelled state ``src`` to ``dst`` whole (replacing it): into a sibling
     temporary folder, checked with :func:`read_info`, then committed in ``dst`` as its
-    newest generation (:func:`parknss.nss.train_state.commit`); a copy that a
+    newest generation (:func:`parknss.nss.state_files.commit`); a copy that a
     checkpoint write in ``src`` tore is made again, up to :data:`COPY_TRIES` times."""
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = dst.with_name(dst.name + ".tmp")
@@ -137,7 +141,7 @@ def copy_state(src: Path, dst: Path) -> StateInfo:
         try:
             meta = (src / META).read_bytes()  # the JSON first: it names the tensor file
             (tmp / META).write_bytes(meta)
-            tensors = train_state.tensors_name(json.loads(meta))
+            tensors = state_files.tensors_name(json.loads(meta))
             for name in (JOB_FILE, tensors):
                 shutil.copyfile(src / name, tmp / name)
             if (src / SITTINGS).is_file():
@@ -147,14 +151,14 @@ def copy_state(src: Path, dst: Path) -> StateInfo:
             last = exc if isinstance(exc, CheckpointError) else CheckpointError(str(exc))
             continue
         # into dst as its newest generation: the state parked there before stays whole
-        # until the commit (train_state.commit), so a kill never loses both; then only the
+        # until the commit (state_files.commit), so a kill never loses both; then only the
         # new one is kept (what is committed to git)
         dst.mkdir(parents=True, exist_ok=True)
         for name in (JOB_FILE, tensors):
             durable.write_bytes(dst / name, (tmp / name).read_bytes())
         if (tmp / SITTINGS).is_file():
             durable.write_bytes(dst / SITTINGS, (tmp / SITTINGS).read_bytes())
-        train_state.commit(dst, meta, keep_previous=False)
+        state_files.commit(dst, meta, keep_previous=False)
         shutil.rmtree(tmp, ignore_errors=True)
         info.folder = dst
         return info
@@ -186,7 +190,7 @@ def seed(root: Path, key: str, state_dir: str | Path) -> StateInfo | None:
     dst.mkdir(parents=True, exist_ok=True)
     try:
         meta = (src / META).read_bytes()
-        name = train_state.tensors_name(json.loads(meta))
+        name = state_files.tensors_name(json.loads(meta))
         blob = (src / name).read_bytes()
     except (OSError, ValueError, AttributeError, CheckpointError):
         return None
@@ -196,7 +200,7 @@ def seed(root: Path, key: str, state_dir: str | Path) -> StateInfo | None:
     durable.write_bytes(dst / name, blob)
     if (src / SITTINGS).is_file():
         durable.write_bytes(dst / SITTINGS, (src / SITTINGS).read_bytes())
-    train_state.commit(dst, meta)
+    state_files.commit(dst, meta)
     return info
 
 
@@ -215,8 +219,7 @@ def add_sitting(folder: str | Path, sitting: dict) -> None:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rows = [*read_sittings(folder), {**sitting, "from_step": read_step(folder) or 0}]
-    durable.write_bytes(folder / SITTINGS,
-                        (json.dumps(rows, indent=1, sort_keys=True) + "\n").encode())
+    _write_json(folder / SITTINGS, rows)
 
 
 def unpark(root: Path, key: str) -> bool:
