@@ -241,3 +241,26 @@ def test_read_yaml_mapping_empty_file(tmp_path):
     f = tmp_path / "e.yaml"
     f.write_text("")
     assert read_yaml_mapping(f) == {}
+
+
+class _Before(StrictModel):
+    a: int = 1
+
+
+class _After(StrictModel):
+    """``_Before`` with a field added later, registered as omitted at its default."""
+
+    omit_at_default = frozenset({"b"})
+    a: int = 1
+    b: str = "old"
+
+
+def test_a_field_added_at_its_default_leaves_the_dump_and_digest_as_before():
+    assert _After().model_dump() == _Before().model_dump() == {"a": 1}
+    assert _After().digest() == _Before().digest()
+    changed = _After(b="new")
+    assert changed.model_dump() == {"a": 1, "b": "new"}
+    assert changed.digest() != _Before().digest()
+    # the dump still round-trips through validation and override
+    assert _After.model_validate(_After().model_dump()) == _After()
+    assert override(_After(), {"a": 2}).model_dump() == {"a": 2}

@@ -23,10 +23,10 @@ import hashlib
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_serializer
 
 from parknss.errors import ConfigError
 
@@ -44,9 +44,25 @@ installed wheel this is the ``site-packages`` parent and holds no repository."""
 
 
 class StrictModel(BaseModel):
-    """Base for every config: frozen, no unknown keys."""
+    """Base for every config: frozen, no unknown keys.
+
+    ``omit_at_default`` names fields that a dump (and so :meth:`digest`) leaves out while
+    they hold their default: a field added to a config after results keyed by its dump
+    exist (run folders' manifests, fits in progress, stored entries) goes there, so those
+    keep reading as the same config, and a run folder started before the field existed
+    resumes; set to another value, the field is dumped and digested."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+    omit_at_default: ClassVar[frozenset[str]] = frozenset()
+
+    @model_serializer(mode="wrap")
+    def _omit_defaults(self, handler) -> dict:
+        doc = handler(self)
+        fields = type(self).model_fields
+        for name in self.omit_at_default:
+            if getattr(self, name) == fields[name].default:
+                doc.pop(name, None)
+        return doc
 
     def digest(self) -> str:
         """Stable short hash of the config values (for caches and run folders)."""

@@ -36,3 +36,18 @@ def test_a_fold_state_killed_anywhere_resumes_to_the_uninterrupted_weights(tiny_
     weights = [(tmp_path / d / "model.safetensors").read_bytes() for d in ("ref", "resumed")]
     assert weights[0] == weights[1]
     assert res["errors"] == ref["errors"] and res["history"]["raw"] == ref["history"]["raw"]
+
+
+def test_a_running_study_keeps_the_nss_config_it_read_at_its_start(tmp_path):
+    """fold_config reads each file once per process: a later edit of the file (an upgrade
+    adding a field this process's schema lacks) does not reach a study in progress."""
+    from parknss.experiments.folds import fold_config
+
+    p = tmp_path / "nss.yaml"
+    p.write_text("train:\n  epochs: 7\n")
+    first = fold_config(str(p), {"train": {"seed": 3}})
+    p.write_text("train:\n  epochs: 9\n  a_field_from_the_future: 1\n")
+    again = fold_config(str(p), {"train": {"seed": 4}})
+    assert (first.train.epochs, first.train.seed) == (7, 3)
+    assert (again.train.epochs, again.train.seed) == (7, 4)
+    assert fold_config(str(p), None) == fold_config(str(p), {})

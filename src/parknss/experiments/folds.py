@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from parknss.config import override
 from parknss.data.splits import Fold, FoldPlan, cv_plan, leave_r_out_plan
 from parknss.data.trial import Campaign, Trial
 from parknss.errors import ConfigError
@@ -90,10 +91,22 @@ def make_fold(
     return folds[index]
 
 
+_READ: dict[str, NSSConfig] = {}
+"""The NSS config files this process has read, by resolved path ("" the shipped one)."""
+
+
 def fold_config(config: str | None, overrides: dict | None) -> NSSConfig:
     """The NSS config: a YAML file (default: the shipped configs/nss.yaml, the paper's
-    values) with per-section overrides, e.g. ``{"train": {"epochs": 30}}``."""
-    return load_nss_config(config, **(overrides or {}))
+    values) with per-section overrides, e.g. ``{"train": {"epochs": 30}}``.
+
+    Each file is read once per process: a study that runs for hours keeps the config it
+    read at its start, when it stores its fits too, even if the file (or the shipped file,
+    by an upgrade of the checkout) changes under it meanwhile."""
+    key = str(Path(config).resolve()) if config else ""
+    base = _READ.get(key)
+    if base is None:
+        base = _READ[key] = load_nss_config(config)
+    return override(base, overrides or None, source=str(config or "configs/nss.yaml"))
 
 
 def fold_job(
