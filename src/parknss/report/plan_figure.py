@@ -92,7 +92,8 @@ def _footprints_along(traj: Trajectory, every: float) -> list[np.ndarray]:
     for seg in traj.segments:
         s = seg.arc_length
         targets = np.arange(0.0, s[-1], every)
-        idx = np.unique(np.searchsorted(s, targets).clip(0, len(s) - 1))
+        idx = np.searchsorted(s, targets).clip(0, len(s) - 1)  # non-decreasing
+        idx = idx[np.diff(idx, prepend=-1) > 0]  # unique (np.unique imports numpy.ma)
         out.extend(seg.poses[i] for i in idx)
         out.append(seg.poses[-1])
     return out
