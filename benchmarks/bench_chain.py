@@ -4,8 +4,10 @@
 
 Replays the longest logged command stream of the default campaign and reports, for each
 implementation, the median time per 10 ms step (of 7 repeats, 3 or 2 for the slow ones)
-and the real-time factor 10 ms / step, both in wall time (what a user waits for) and in
-this thread's CPU time (what the step costs, less inflated on a loaded machine):
+and the real-time factor 10 ms / step, both in wall time (what a user waits for; the
+median and the best repeat) and in this thread's CPU time (what the step costs, less
+inflated on a loaded machine, where the wall time measures the scheduler as much as the
+step):
 
 * ``c_fmu``: the generated C step inside the FMU's binary (``pk_run`` of
   binaries/linux64/parknss_chain.so over the whole stream, one call; portable SSE2 build);
@@ -48,11 +50,13 @@ CMDS = ("gear", "torque_cmd", "decel_cmd", "steer_cmd")
 
 
 CPU: dict[str, float] = {}  # µs per step in this thread's CPU time, by name
+BEST: dict[str, float] = {}  # µs per step, the best wall time of the repeats, by name
 
 
 def _per_step(fn, n: int, repeats: int = 7, name: str | None = None) -> float:
     """Median over ``repeats`` of the wall time of fn() divided by n, in µs (the median CPU
-    time of this thread in ``CPU[name]``)."""
+    time of this thread in ``CPU[name]``, the best wall time in ``BEST[name]``: other
+    processes only add wall time, so the best is the least inflated, timeit's rule)."""
     ts, cs = [], []
     for _ in range(repeats):
         c0, t0 = time.thread_time(), time.perf_counter()
@@ -61,6 +65,7 @@ def _per_step(fn, n: int, repeats: int = 7, name: str | None = None) -> float:
         cs.append((time.thread_time() - c0) / n)
     if name:
         CPU[name] = float(np.median(cs) * 1e6)
+        BEST[name] = float(np.min(ts) * 1e6)
     return float(np.median(ts) * 1e6)
 
 
@@ -173,7 +178,7 @@ def main() -> None:
                 for cmd in cmds:
                     dep.step(cmd)
 
-            res[f"python_{engine}"] = _per_step(plant_run, n, 7 if engine == "native" else 3,
+            res[f"python_{engine}"] = _per_step(plant_run, n, 15 if engine == "native" else 3,
                                                 name=f"python_{engine}")
 
         import onnxruntime as ort
@@ -203,7 +208,7 @@ def main() -> None:
 
     doc = {"chain": a.chain, "steps": n, "us_per_step": res,
            "real_time_factor": {k: 1e4 / v for k, v in res.items()},
-           "cpu_us_per_step": CPU,
+           "cpu_us_per_step": CPU, "best_wall_us_per_step": BEST,
            "cpu_real_time_factor": {k: 1e4 / v for k, v in CPU.items()},
            "native_vs_numpy_max_abs": dict(zip(OUTPUTS, agree.tolist(), strict=True)),
            "load_average": os.getloadavg()[0],
@@ -213,12 +218,17 @@ def main() -> None:
         return
     print(f"one run, {n} steps; load average {doc['load_average']:.1f} on {os.cpu_count()} "
           "cores; wall and CPU time per 10 ms step")
-    print(f"{'':19s} {'wall µs':>9s} {'x real':>7s} {'CPU µs':>9s} {'x real':>7s} "
-          f"{'/ FMU C':>8s} {'/ native C':>10s}  (ratios of CPU times)")
+    print(f"{'':19s} {'wall µs':>9s} {'x real':>7s} {'best x':>7s} {'CPU µs':>9s} "
+          f"{'x real':>7s} {'/ FMU C':>8s} {'/ native C':>10s}  (wall: median and best of the "
+          "repeats; ratios of CPU times)")
     for k, v in res.items():
         c = CPU[k]
-        print(f"{k:19s} {v:9.2f} {1e4 / v:7.0f} {c:9.2f} {1e4 / c:7.0f} "
+        print(f"{k:19s} {v:9.2f} {1e4 / v:7.0f} {1e4 / BEST[k]:7.0f} {c:9.2f} {1e4 / c:7.0f} "
               f"{c / CPU['c_fmu']:8.2f} {c / CPU['c_native']:10.2f}")
+    py = "python_native"
+    print(f"the Python Plant step (native engine): {1e4 / CPU[py]:.0f}x real time in CPU time, "
+          f"{1e4 / res[py]:.0f}x in median wall time, {1e4 / BEST[py]:.0f}x in the best "
+          f"(goal: 250x); overhead over the C step {CPU[py] / CPU['c_native']:.2f}x")
     print("native C vs NumPy twin, largest difference: "
           + ", ".join(f"{k} {v:.1e}" for k, v in doc["native_vs_numpy_max_abs"].items()))
     print(f"chain {a.chain}: {doc['specs']}")

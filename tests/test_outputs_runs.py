@@ -416,7 +416,7 @@ def test_plan(tmp_path, capsys, monkeypatch):
     _check_command(capsys, monkeypatch, out, argv,
                    ["plan", "--scene", "15", "--no-refine", "--out", str(out)],
                    held="campaign.json", command="parknss plan")
-    assert sorted(p.suffix for p in out.iterdir()) == [".json", ".json", ".png"]
+    assert sorted(p.suffix for p in out.iterdir()) == [".json", ".json", ".svg"]
     grid = tmp_path / "plan_grid"
     assert main(["plan", "--grid", "12", "--no-refine", "--out", str(grid)]) == 0
     assert (grid / "plan_grid_12.json").is_file()

@@ -136,11 +136,16 @@ def read_json(path: str | Path, error: type[Exception] = ConfigError) -> Any:
     return parse_json(text, str(p), error)
 
 
+SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""PyYAML's safe loader, in C (libyaml) where available."""
+
+
 def parse_yaml(text: str, source: str, error: type[Exception] = ConfigError) -> Any:
-    """``text`` parsed as YAML (safe loader), or one-line ``error`` naming ``source``: not
+    """``text`` parsed as YAML (the safe loader, libyaml's when PyYAML has it: the same
+    documents, parsed several times faster), or one-line ``error`` naming ``source``: not
     valid YAML, or nested deeper than :data:`MAX_NESTING`."""
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=SAFE_LOADER)
     except RecursionError as exc:
         raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused") from exc
     except yaml.YAMLError as exc:

@@ -99,8 +99,8 @@ def test_a_safe_name_plans_into_runs_plan_name(tmp_path, monkeypatch, capsys):
     assert main(["plan", "--scene", str(scene), "--no-refine", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     folder = tmp_path / "runs" / "plan" / name
-    assert Path(doc["figure"]).resolve() == (folder / f"plan_{name}.png").resolve()
-    assert sorted(p.name for p in folder.iterdir()) == [f"plan_{name}.png", "run.json"]
+    assert Path(doc["figure"]).resolve() == (folder / f"plan_{name}.svg").resolve()
+    assert sorted(p.name for p in folder.iterdir()) == [f"plan_{name}.svg", "run.json"]
 
 
 def test_a_product_link_out_of_the_folder_is_refused(tmp_path, capsys):

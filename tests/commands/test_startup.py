@@ -90,11 +90,11 @@ LIGHT_COMMANDS = {
     # whether a derived entry (Table V cell, ladder, rating) is current is computed from
     # what it reads (NumPy, no torch)
     "results list --json --store {results}": ("numpy",),
-    # planning needs CasADi, the figure matplotlib (not pyplot); a scene's heuristic grid
-    # is small enough for the plain-Python Dijkstra, the closed-loop configs need no
-    # scipy.linalg: no SciPy at all
-    "plan --scene 26 --json --out {tmp}/plan": ("numpy", "casadi", "matplotlib"),
-    "plan --scene 26 --no-refine --json --out {tmp}/coarse": ("numpy", "casadi", "matplotlib"),
+    # the refinement needs CasADi (the search alone does not); the figure is SVG (no
+    # matplotlib); a scene's heuristic grid is small enough for the plain-Python
+    # Dijkstra, the closed-loop configs need no scipy.linalg: no SciPy at all
+    "plan --scene 26 --json --out {tmp}/plan": ("numpy", "casadi"),
+    "plan --scene 26 --no-refine --json --out {tmp}/coarse": ("numpy",),
     "plan --scene 26 --no-figure --json --out {tmp}/bare": ("numpy", "casadi"),
 }
 

@@ -45,3 +45,30 @@ def test_stepping_together_is_stepping_each_copy(plant):
     assert ends >= n  # every copy was truncated (and reset) at least once
     together.close()
     apart.close()
+
+
+def test_the_chain_copies_are_stepped_in_one_c_call_a_sample(monkeypatch):
+    # make_vec's batched path: every 10 ms sample of the moving copies is one call of the
+    # native step_many over all of them, never a plant's own step
+    import parknss.chain.native as native
+    from parknss.chain.deployed import DeployedChain
+
+    calls: list[int] = []
+    many = native.step_many
+
+    def counted(chains, cmds):
+        calls.append(len(chains))
+        return many(chains, cmds)
+
+    def alone(*_a, **_k):
+        raise AssertionError("a chain copy stepped on its own")
+
+    monkeypatch.setattr(native, "step_many", counted)
+    monkeypatch.setattr(DeployedChain, "step", alone)
+    n = 4
+    vec = make_vec(n, plant="chain", chain_engine="native")
+    vec.reset(seed=1)
+    steps = vec.envs[0].cfg.steps_per_action
+    vec.step(np.zeros((n, 2), dtype=np.float32))
+    assert calls == [n] * steps
+    vec.close()

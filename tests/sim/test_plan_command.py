@@ -31,8 +31,9 @@ def test_plan_command_prints_one_json_document_and_draws(tmp_path, capsys):
     assert out["cell"] == 14 and out["plannable"] is True
     assert out["min_clearance_m"] >= 0.2 and out["cusps"] >= 0
     assert (out["steer_reserve"], out["margin_m"]) == (0.1, 0.2)  # what simulate drives
-    png = tmp_path / "plan_perpendicular-left-t1-open.png"
-    assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+    svg = tmp_path / "plan_perpendicular-left-t1-open.svg"
+    assert svg.is_file() and svg.read_text().startswith("<?xml")
+    assert out["figure"] == str(svg)
     assert json.loads((tmp_path / "plan_perpendicular-left-t1-open.json").read_text()) == out
 
 
@@ -42,7 +43,7 @@ def test_no_figure_plans_the_same_and_draws_nothing(tmp_path, capsys):
     drawn = json.loads(capsys.readouterr().out)
     assert main([*args, "--no-figure", "--out", str(tmp_path / "b")]) == 0
     bare = json.loads(capsys.readouterr().out)
-    assert bare["figure"] is None and drawn["figure"].endswith(".png")
+    assert bare["figure"] is None and drawn["figure"].endswith(".svg")
     skip = {"figure", "plan_time_s", *TIMING_KEYS}
     assert {k: v for k, v in bare.items() if k not in skip} == {
         k: v for k, v in drawn.items() if k not in skip}

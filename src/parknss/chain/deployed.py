@@ -47,10 +47,12 @@ class DeployedChain:
             raise ConfigError(f"chain engine {engine!r}: one of numpy, native")
         self.engine = engine
         self.stepper = self.rt
+        self._row = None  # the native engine's step_row: the Plant step's short path
         if engine == "native":
             from parknss.chain.native import NativeChain
 
             self.stepper = NativeChain(self.rt)
+            self._row = self.stepper.step_row
         self.reset()
 
     # ------------------------------------------------------------ Plant protocol
@@ -65,6 +67,10 @@ class DeployedChain:
     def step(self, cmd: Commands) -> PlantOutput:
         """One 10 ms sample under ``cmd``: the engaged gear (the gear rule,
         :mod:`parknss.actuators.shift`), the actuals and states logged at this sample."""
+        if self._row is not None:
+            o = self._row(float(cmd.gear), float(cmd.torque_cmd), float(cmd.decel_cmd),
+                          float(cmd.steer_cmd))
+            return PlantOutput(int(o[7]), o[0], o[1], o[2], o[3], o[4], o[5], o[6])
         act, (vx, yaw, ax, ay) = self.stepper.step(
             float(cmd.gear), float(cmd.torque_cmd), float(cmd.decel_cmd), float(cmd.steer_cmd)
         )

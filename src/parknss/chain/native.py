@@ -153,6 +153,17 @@ class NativeChain:
         self.gear = o[7]
         return (o[0], o[1], o[2]), (o[3], o[4], o[5], o[6])
 
+    def step_row(self, gear: float, torque_cmd: float, decel_cmd: float,
+                 steer_cmd: float) -> list[float]:
+        """One sample as :meth:`step`, returned as the row (8,) of
+        :data:`~parknss.chain.ccode.OUTPUTS` (the Plant step's path: no tuples built)."""
+        c = self._cmd
+        c[0], c[1], c[2], c[3] = gear, torque_cmd, decel_cmd, steer_cmd
+        self._step(*self._args)
+        o = self._out[:]
+        self.gear = o[7]
+        return o
+
     def run(self, cmds: np.ndarray) -> np.ndarray:
         """Replay commands (T, 4) from the current state; returns (T, 8) rows of
         :data:`~parknss.chain.ccode.OUTPUTS`."""

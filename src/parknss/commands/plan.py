@@ -5,7 +5,7 @@ a CommonRoad XML scenario, a grid cell 0-35, or ``robust:N`` for robustness cell
 an imported scene is also written as scene JSON beside the figure) for the car of
 ``--vehicle`` (default: the car the shipped chain was identified on) exactly as
 ``parknss simulate`` will drive it (:func:`parknss.sim.planner.plan_scene`: the
-closed-loop config's steering reserve and margin), draws it to a PNG (not with
+closed-loop config's steering reserve and margin), draws it to an SVG (not with
 ``--no-figure``) and prints a summary (or one JSON object). ``--no-reserve`` plans as the
 planner alone instead (full steering lock, planning.yaml's margin): a plan that no other
 command drives.
@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
         ),
         no_refine: bool = typer.Option(False, "--no-refine", help="Coarse path only."),
         no_figure: bool = typer.Option(
-            False, "--no-figure", help="--scene: no PNG (and no matplotlib import)."
+            False, "--no-figure", help="--scene: no SVG figure."
         ),
         no_reserve: bool = typer.Option(
             False, "--no-reserve", help="Full lock, planning.yaml margin: not what is driven."

@@ -21,7 +21,8 @@ from parknss.sim.grid import config_paths
 from parknss.sim.scene_formats import load_scene
 
 # the figures, the planner and the closed loop are imported by the runs that use them:
-# `parknss plan` starts without matplotlib.pyplot, the tracker or the closed-loop plants
+# `parknss plan` starts without matplotlib (its figure is SVG), the tracker or the
+# closed-loop plants
 
 
 def _scene_arg(spec: str) -> str | Path:
@@ -43,8 +44,8 @@ def plan_one(
     figure: bool = True,
 ) -> dict:
     """``parknss plan --scene``: plan a scene JSON file, grid cell 0-35 or ``robust:N``
-    (:func:`parknss.sim.planner.plan_named_scene`), draw ``plan_<scene>.png`` (unless not
-    ``figure``: matplotlib is then not even imported) and, with ``out``, write
+    (:func:`parknss.sim.planner.plan_named_scene`), draw ``plan_<scene>.svg`` (unless not
+    ``figure``; SVG written without matplotlib) and, with ``out``, write
     ``plan_<scene>.json``; the plan summary with the figure's path (None without one)."""
     files = files or SimConfigFiles()
     scene = load_scene(spec, files.scenarios_config(), files.vehicle_geometry())
@@ -63,10 +64,10 @@ def plan_one(
             summary["scene_notes"] = list(scene.notes)
         summary["figure"] = None
         if figure:
-            from parknss.report.plan_figure import draw_plan  # matplotlib: ~0.5 CPU s
+            from parknss.report.plan_figure import draw_plan  # SVG, no matplotlib
 
-            png = run.file(f"plan_{name}.png")
-            summary["figure"] = str(draw_plan(scene, png, coarse=plan.coarse,
+            svg = run.file(f"plan_{name}.svg")
+            summary["figure"] = str(draw_plan(scene, svg, coarse=plan.coarse,
                                               refined=plan.refinement, geom=geom))
         if Path(str(spec)).suffix.lower() in (".csv", ".xml"):  # an imported scene
             summary["scene_json"] = str(run.write_json(f"scene_{name}.json",

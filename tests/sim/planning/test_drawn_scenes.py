@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import casadi
 import numpy as np
 import pytest
 from shapely.geometry import Polygon
@@ -95,7 +96,7 @@ def test_any_solver_error_becomes_the_flagged_coarse_fallback(monkeypatch):
         raise RuntimeError("nlpsol: Assertion 'is_regular' failed")
 
     refine_problem.clear_programs()  # every segment's program is built (and fails)
-    monkeypatch.setattr(refine_problem.ca, "nlpsol", broken)
+    monkeypatch.setattr(casadi, "nlpsol", broken)  # what the program build calls
     res = refine(scene, coarse, GEOM, cfg)
     assert not res.ok and res.trajectory.source == "coarse_fallback"
     assert "solver error (RuntimeError" in res.reason

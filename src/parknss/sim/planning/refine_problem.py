@@ -36,13 +36,16 @@ import math
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import casadi as ca
 import numpy as np
 
 from parknss.sim.planning.refine_config import RefineConfig
 from parknss.sim.planning.refine_obca import ObstacleTerm, body_box
 from parknss.vehicle import VehicleGeometry
+
+if TYPE_CHECKING:
+    import casadi as ca  # imported by build_program: `plan --no-refine` runs without it
 
 SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -234,6 +237,8 @@ def clear_programs() -> None:
 def build_program(n, direction, terms, planes, geom, lim, cfg, cpu_time_s) -> SegmentProgram:
     """Build the NLP of the module docstring for this structure (see :class:`SegmentProgram`;
     the rows of g in the order of :func:`program_inputs`' bounds)."""
+    import casadi as ca
+
     d = float(direction)
     X = ca.SX.sym("X", 5, n + 1)
     U = ca.SX.sym("U", 2, n)
