@@ -175,6 +175,7 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         cfg.dt_target_s,
         cfg.min_intervals,
         cfg.max_intervals,
+        cfg.dt_max_s,
     )
     obstacles = scene.obstacle_arrays()
     terms = obstacle_terms(

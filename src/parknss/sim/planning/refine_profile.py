@@ -103,6 +103,7 @@ def warm_start(
     dt: float,
     n_min: int,
     n_max: int,
+    dt_max: float = math.inf,
 ) -> WarmStart:
     """The coarse segment driven stop-to-steer, sampled at N+1 knots.
 
@@ -112,7 +113,11 @@ def warm_start(
     starts from a point that satisfies the dynamics, the bounds and the clearance, and a
     segment that must be driven at full lock on both sides of a steering change (a path
     on the boundary of the reachable set) still has its only solution available. N comes
-    from the duration and ``dt`` (s), clamped to [n_min, n_max].
+    from the duration and ``dt`` (s), clamped to [n_min, n_max], but at least
+    ceil(duration / ``dt_max``) (s, the solver's step bound): a segment longer than
+    ``n_max`` steps of ``dt_max`` allow (TPCAP case 19's 37 m reverse, 46 s) gets more
+    intervals instead of a warm start whose own step breaks the bound (IPOPT then found
+    the problem infeasible: ``n_max`` steps cannot last long enough at the speed limit).
     """
     bounds, steer = _pieces(seg)
     lengths = np.diff(bounds)
@@ -124,6 +129,7 @@ def warm_start(
     edges = np.concatenate([[0.0], np.cumsum(spans)])
     total = float(edges[-1])
     n = int(min(max(math.ceil(total / dt), n_min), n_max))
+    n = max(n, math.ceil(total / dt_max - 1e-9))
     t = np.linspace(0.0, total, n + 1)
     j = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(spans) - 1)
     s, speed, sw = np.empty(n + 1), np.zeros(n + 1), np.empty(n + 1)
