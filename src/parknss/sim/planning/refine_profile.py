@@ -97,12 +97,12 @@ def _pieces(seg: Segment) -> tuple[np.ndarray, np.ndarray]:
 def least_intervals(
     length: float, v_max: float, a_max: float, jerk_max: float, dt_max: float
 ) -> int:
-    """The fewest intervals of at most ``dt_max`` (s) in which a gear segment ``length``
-    (m) long can be driven rest to rest within the speed (m/s), acceleration (m/s²) and
-    jerk (m/s³) limits: its least time, at most length / v + v / a + a / j (s), over
-    ``dt_max``. TPCAP case 19's 37.2 m reverse needs 46.6 s, so 47 intervals: with
-    ``max_intervals`` (40) steps of 1 s it was infeasible (IPOPT:
-    ``Infeasible_Problem_Detected``)."""
+    """Enough intervals of at most ``dt_max`` (s) for a gear segment ``length`` (m) long
+    to be driven rest to rest within the speed (m/s), acceleration (m/s²) and jerk
+    (m/s³) limits: length / v + v / a + a / j (s), its least time at these limits when
+    it is long enough to cruise (an upper bound of it otherwise), over ``dt_max``.
+    TPCAP case 19's 37.2 m reverse needs 46.6 s, so 47 intervals: with ``max_intervals``
+    (40) steps of 1 s it was infeasible (IPOPT: ``Infeasible_Problem_Detected``)."""
     t_min = length / v_max + v_max / a_max + a_max / jerk_max
     return math.ceil(t_min / dt_max - 1e-9)
 
@@ -128,7 +128,8 @@ def warm_start(
     on the boundary of the reachable set) still has its only solution available. N comes
     from the duration and ``dt`` (s), clamped to [n_min, n_max], but never fewer than
     ``n_floor`` (:func:`least_intervals`: a segment too long to be driven in ``n_max``
-    steps of the solver's largest step).
+    steps of the solver's largest step; its warm-start step may then exceed that bound,
+    and IPOPT moves the start inside it).
     """
     bounds, steer = _pieces(seg)
     lengths = np.diff(bounds)
