@@ -14,8 +14,13 @@ from parknss.sim.planning.hybrid_astar import HybridAStar, load_planning_config,
 from parknss.sim.planning.refine import refine
 from parknss.sim.planning.refine_obca import body_box, dual_warm_start, halfspaces
 from parknss.sim.planning.refine_problem import heading_change
-from parknss.sim.planning.refine_profile import trapezoid, trapezoid_at_time
-from parknss.sim.scenarios import Obstacle, grid_scene
+from parknss.sim.planning.refine_profile import (
+    least_intervals,
+    trapezoid,
+    trapezoid_at_time,
+    warm_start,
+)
+from parknss.sim.scenarios import Obstacle, Scene, grid_scene
 from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry
 
@@ -218,3 +223,26 @@ def test_planning_config_has_a_strict_refine_section():
     assert cfg.refine.speed_max_ms == pytest.approx(3.0 / 3.6, abs=1e-3)
     with pytest.raises(ValidationError):
         type(cfg.refine).model_validate({"no_such_field": 1})
+
+
+def test_a_segment_longer_than_max_intervals_allow_gets_more_intervals():
+    """TPCAP case 19's 37 m reverse: 40 steps of at most 1 s cannot last the 46.6 s it
+    needs at 3 km/h, so IPOPT found the program infeasible. Such a segment now gets the
+    least number of intervals that can last long enough; the others keep their N."""
+    cfg = load_planning_config()
+    rc = cfg.refine
+    limits = (rc.speed_max_ms, rc.accel_max_ms2, rc.jerk_max_ms3, rc.dt_max_s)
+    assert least_intervals(37.2, *limits) == 47
+    assert least_intervals(31.0, *limits) <= rc.max_intervals  # TPCAP case 11: unchanged
+    x = np.linspace(0.0, -45.0, 451)
+    seg = Segment(np.column_stack([x, np.zeros_like(x), np.zeros_like(x)]), -1)
+    floor = least_intervals(seg.length, *limits)
+    assert floor > rc.max_intervals
+    ws = warm_start(seg, GEOM, rc.speed_max_ms, rc.accel_max_ms2, rc.steer_rate_max_dps,
+                    rc.dt_target_s, rc.min_intervals, rc.max_intervals, floor)
+    assert len(ws.poses) - 1 == floor
+    scene = Scene((-50.0, -5.0, 5.0, 5.0), (), (0.0, 0.0, 0.0), (-45.0, 0.0, 0.0))
+    res = refine(scene, Trajectory([seg]), GEOM, cfg)
+    assert res.ok, res.reason
+    assert res.segments[0]["intervals"] == floor
+    assert res.trajectory.segments[0].t[-1] >= 45.0 / rc.speed_max_ms

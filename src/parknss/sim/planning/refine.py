@@ -47,6 +47,7 @@ from parknss.sim.planning.refine_config import RefineConfig
 from parknss.sim.planning.refine_obca import obstacle_terms, rewarm
 from parknss.sim.planning.refine_problem import limits, solve_segment
 from parknss.sim.planning.refine_profile import (
+    least_intervals,
     profile_segment,
     sample_solution,
     step_curvature,
@@ -175,6 +176,9 @@ def _refine_segment(seg: Segment, scene, geom, pcfg: PlanningConfig, lim, margin
         cfg.dt_target_s,
         cfg.min_intervals,
         cfg.max_intervals,
+        least_intervals(
+            seg.length, cfg.speed_max_ms, cfg.accel_max_ms2, cfg.jerk_max_ms3, cfg.dt_max_s
+        ),
     )
     obstacles = scene.obstacle_arrays()
     terms = obstacle_terms(

@@ -38,7 +38,9 @@ class RefineConfig(StrictModel):
     # discretisation
     dt_target_s: float = Field(1.0, gt=0.0, description="warm-start time step, s")
     min_intervals: int = Field(8, ge=2, description="fewest intervals per gear segment")
-    max_intervals: int = Field(40, ge=2, description="most intervals per gear segment")
+    max_intervals: int = Field(
+        40, ge=2, description="most intervals per gear segment (more where dt_max_s needs them)"
+    )
     dt_min_s: float = Field(0.02, gt=0.0, description="lower bound of the free time step, s")
     dt_max_s: float = Field(1.0, gt=0.0, description="upper bound of the free time step, s")
     min_segment_m: float = Field(

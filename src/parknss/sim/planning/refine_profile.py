@@ -94,6 +94,19 @@ def _pieces(seg: Segment) -> tuple[np.ndarray, np.ndarray]:
     return bounds, st[np.concatenate([[0], new])]
 
 
+def least_intervals(
+    length: float, v_max: float, a_max: float, jerk_max: float, dt_max: float
+) -> int:
+    """Enough intervals of at most ``dt_max`` (s) for a gear segment ``length`` (m) long
+    to be driven rest to rest within the speed (m/s), acceleration (m/s²) and jerk
+    (m/s³) limits: length / v + v / a + a / j (s), its least time at these limits when
+    it is long enough to cruise (an upper bound of it otherwise), over ``dt_max``.
+    TPCAP case 19's 37.2 m reverse needs 46.6 s, so 47 intervals: with ``max_intervals``
+    (40) steps of 1 s it was infeasible (IPOPT: ``Infeasible_Problem_Detected``)."""
+    t_min = length / v_max + v_max / a_max + a_max / jerk_max
+    return math.ceil(t_min / dt_max - 1e-9)
+
+
 def warm_start(
     seg: Segment,
     geom: VehicleGeometry,
@@ -103,6 +116,7 @@ def warm_start(
     dt: float,
     n_min: int,
     n_max: int,
+    n_floor: int = 0,
 ) -> WarmStart:
     """The coarse segment driven stop-to-steer, sampled at N+1 knots.
 
@@ -112,7 +126,10 @@ def warm_start(
     starts from a point that satisfies the dynamics, the bounds and the clearance, and a
     segment that must be driven at full lock on both sides of a steering change (a path
     on the boundary of the reachable set) still has its only solution available. N comes
-    from the duration and ``dt`` (s), clamped to [n_min, n_max].
+    from the duration and ``dt`` (s), clamped to [n_min, n_max], but never fewer than
+    ``n_floor`` (:func:`least_intervals`: a segment too long to be driven in ``n_max``
+    steps of the solver's largest step; its warm-start step may then exceed that bound,
+    and IPOPT moves the start inside it).
     """
     bounds, steer = _pieces(seg)
     lengths = np.diff(bounds)
@@ -124,6 +141,7 @@ def warm_start(
     edges = np.concatenate([[0.0], np.cumsum(spans)])
     total = float(edges[-1])
     n = int(min(max(math.ceil(total / dt), n_min), n_max))
+    n = max(n, n_floor)
     t = np.linspace(0.0, total, n + 1)
     j = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, len(spans) - 1)
     s, speed, sw = np.empty(n + 1), np.zeros(n + 1), np.empty(n + 1)
