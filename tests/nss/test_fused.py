@@ -226,3 +226,19 @@ def test_workspace_buffers_are_recycled():
     for _ in range(3):
         assert epoch() == first  # the very same buffers each epoch, none new
     assert len(WORKSPACE.free) <= WORKSPACE.keep
+
+
+def test_workspace_rows_are_the_unbound_views_made_once():
+    ws = type(WORKSPACE)(keep_rows=2)
+    a = torch.arange(2 * 3 * 4 * 5, dtype=torch.float32).view(2, 3, 4, 5)
+    rows = ws.rows(a)
+    assert len(rows) == 6 and all(torch.equal(r, a.view(6, 4, 5)[i]) for i, r in enumerate(rows))
+    rows[4].fill_(-1.0)  # views: a write through a row lands in the buffer
+    assert bool((a[1, 1] == -1.0).all())
+    assert ws.rows(a) is rows  # the same list, not new views
+    b, c = torch.zeros(3, 4, 5), torch.zeros(4, 5)
+    ws.rows(b), ws.rows(c)  # a third buffer drops the least recently used one
+    assert ws.rows(a) is not rows and len(ws._rows) == 2
+    with pytest.raises(ValueError, match="contiguous"):
+        ws.rows(a.transpose(2, 3))
+
