@@ -131,10 +131,11 @@ def test_fused_equals_eager_outputs_and_gradients(residual_yaw):
     torch.testing.assert_close(guf, gue, rtol=1e-10, atol=1e-10)
 
 
-def test_fused_equals_eager_in_float32():
-    """The training dtype: same numbers up to float32 rounding."""
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_fused_equals_eager_in_float32(kernels):
+    """The training dtype: same numbers up to float32 rounding, with either kernels."""
     camp = make_campaign(120, reps=1)
-    m, _ = tiny_model(camp, seed=3, dtype="float32")
+    m, _ = tiny_model(camp, seed=3, dtype="float32", model={"fused_kernels": kernels})
     w = whole_trials(list(camp))
     x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
     rf, gf, _ = _grads(m, x0, u, "fused")

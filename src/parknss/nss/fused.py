@@ -214,14 +214,14 @@ def _prepare(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P):
     )
 
 
-def _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P):
+def _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P, ps):
     """The fast kernels' forward arguments (the folded weights of _forward_fast_kernel);
-    fills P (T-1, B, H) = 2·(W0u·u + b0)."""
+    fills P (T-1, B, H) = 2·(W0u·u + b0), whose rows are ps."""
     T1, B, m = U.shape
     torch.addmm(b0 * 2.0, U.reshape(T1 * B, m), W0[:, 2:].t(), alpha=2.0, out=P.view(T1 * B, -1))
     return (
         x0.contiguous(),
-        WORKSPACE.rows(P),
+        ps,
         (W0[:, :2] * 2.0).t().contiguous(),
         [(w * 4.0).t().contiguous() for w in Ws],
         [((bb - w.sum(1)) * 2.0).contiguous() for w, bb in zip(Ws, bs, strict=True)],
@@ -231,10 +231,17 @@ def _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P):
 
 
 def _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, fast: bool, Hs, store: bool):
-    P = WORKSPACE.take((U.shape[0], U.shape[1], W0.shape[0]), x0.dtype)
+    """X (T, B, 2); the activations into Hs (NL, T-1, B, H) if store, else Hs (NL, 1, B, H)
+    is scratch. The fast kernels, storing, compute P into Hs[0] and each step's first
+    product in place there (the same row objects: addmm then copies no bias)."""
+    T1 = U.shape[0]
     hs = WORKSPACE.rows(Hs) if store else list(Hs.view(-1, Hs.shape[2], Hs.shape[3]).unbind(0))
+    if fast and store:
+        args = _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, Hs[0], hs[:T1])
+        return _forward_fast(*args, hs, store)
+    P = WORKSPACE.take((T1, U.shape[1], W0.shape[0]), x0.dtype)
     if fast:
-        args = _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P)
+        args = _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P, WORKSPACE.rows(P))
         X = _forward_fast(*args, hs, store)
     else:
         args = _prepare(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P)
