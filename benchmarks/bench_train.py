@@ -14,7 +14,9 @@ readout + output net + loss + backward + Adam step, timed for
   a preallocated buffer, hand-written reverse-time backward, weight gradients as single
   large matmuls; parknss.nss.fused), and
 * fast: the fused engine with ``model.fused_kernels: fast`` (the same functions by
-  cheaper kernels, rounded differently: tanh as 2·σ(2a) - 1, skinny products reordered),
+  cheaper kernels, rounded differently: tanh(a) = 2·σ(2a) - 1 with the affine 2s - 1
+  folded into the next layer's weights, two kernels a layer and step; skinny products
+  reordered),
 
 with identical initial weights, data and loss code, in the same run, interleaved epoch by
 epoch, with one intra-op thread. Readout, output network and loss are the same code in

@@ -131,10 +131,11 @@ def test_fused_equals_eager_outputs_and_gradients(residual_yaw):
     torch.testing.assert_close(guf, gue, rtol=1e-10, atol=1e-10)
 
 
-def test_fused_equals_eager_in_float32():
-    """The training dtype: same numbers up to float32 rounding."""
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_fused_equals_eager_in_float32(kernels):
+    """The training dtype: same numbers up to float32 rounding, with either kernels."""
     camp = make_campaign(120, reps=1)
-    m, _ = tiny_model(camp, seed=3, dtype="float32")
+    m, _ = tiny_model(camp, seed=3, dtype="float32", model={"fused_kernels": kernels})
     w = whole_trials(list(camp))
     x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
     rf, gf, _ = _grads(m, x0, u, "fused")
@@ -226,3 +227,19 @@ def test_workspace_buffers_are_recycled():
     for _ in range(3):
         assert epoch() == first  # the very same buffers each epoch, none new
     assert len(WORKSPACE.free) <= WORKSPACE.keep
+
+
+def test_workspace_rows_are_the_unbound_views_made_once():
+    ws = type(WORKSPACE)(keep_rows=2)
+    a = torch.arange(2 * 3 * 4 * 5, dtype=torch.float32).view(2, 3, 4, 5)
+    rows = ws.rows(a)
+    assert len(rows) == 6 and all(torch.equal(r, a.view(6, 4, 5)[i]) for i, r in enumerate(rows))
+    rows[4].fill_(-1.0)  # views: a write through a row lands in the buffer
+    assert bool((a[1, 1] == -1.0).all())
+    assert ws.rows(a) is rows  # the same list, not new views
+    b, c = torch.zeros(3, 4, 5), torch.zeros(4, 5)
+    ws.rows(b), ws.rows(c)  # a third buffer drops the least recently used one
+    assert ws.rows(a) is not rows and len(ws._rows) == 2
+    with pytest.raises(ValueError, match="contiguous"):
+        ws.rows(a.transpose(2, 3))
+

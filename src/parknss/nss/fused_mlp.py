@@ -24,7 +24,10 @@ from parknss.nss.workspace import WORKSPACE
 
 
 class FusedTanhMLP(torch.autograd.Function):
-    """y = W_out·tanh(... tanh(W0·x + b0) ...) + b_out, activations in recycled buffers."""
+    """y = W_out·tanh(... tanh(W0·x + b0) ...) + b_out, activations in recycled buffers.
+
+    With the fast kernels the buffers hold s = σ(2a) (tanh(a) = 2s - 1) and the affine
+    2s - 1 is folded into the next product's weights and bias, as in the fused rollout."""
 
     @staticmethod
     def forward(ctx, kernels: str, x, *params):
@@ -33,17 +36,23 @@ class FusedTanhMLP(torch.autograd.Function):
         N = x.shape[0]
         hs = []
         h = x
-        for W, b in zip(Ws[:-1], bs[:-1], strict=True):
+        for i, (W, b) in enumerate(zip(Ws[:-1], bs[:-1], strict=True)):
             buf = WORKSPACE.take((N, W.shape[0]), x.dtype)
-            if fast:  # 2·σ(2a) - 1, the addmm giving 2a = 2b + 2·W·h
+            if fast and i == 0:  # s = σ(2a), the addmm giving 2a = 2b + 2·W·x
                 torch.addmm(b * 2.0, h, W.t(), alpha=2.0, out=buf)
-                torch.add(-1.0, buf.sigmoid_(), alpha=2.0, out=buf)
+                buf.sigmoid_()
+            elif fast:  # 2a = 2·(b - W·1) + 4·W·s_prev
+                torch.addmm((b - W.sum(1)) * 2.0, h, W.t(), alpha=4.0, out=buf)
+                buf.sigmoid_()
             else:
                 torch.addmm(b, h, W.t(), out=buf)
                 buf.tanh_()
             hs.append(buf)
             h = buf
-        y = torch.addmm(bs[-1], h, Ws[-1].t())
+        if fast and hs:
+            y = torch.addmm(bs[-1] - Ws[-1].sum(1), h, Ws[-1].t(), alpha=2.0)
+        else:
+            y = torch.addmm(bs[-1], h, Ws[-1].t())
         ctx.hs, ctx.fast = hs, fast
         for buf in hs:
             weakref.finalize(ctx, WORKSPACE.give, buf)
@@ -54,6 +63,8 @@ class FusedTanhMLP(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, g):
         x, *Ws = ctx.saved_tensors
+        if ctx.fast and ctx.hs:
+            return _backward_fast(ctx, g.contiguous(), x, Ws)
         hs = ctx.hs
         g = g.contiguous()
         grads_W: list = [None] * len(Ws)
@@ -68,18 +79,56 @@ class FusedTanhMLP(torch.autograd.Function):
             torch.mm(d_next, W_next, out=d)
             torch.ops.aten.tanh_backward(d, hs[i], grad_input=d)
             h_in = hs[i - 1] if i > 0 else x
-            if ctx.fast and i == 0:  # skinny input: (xᵀ·δ)ᵀ runs ~10x faster than δᵀ·x
-                grads_W[i] = h_in.t().mm(d).t()
-            else:
-                grads_W[i] = d.t().mm(h_in)
+            grads_W[i] = d.t().mm(h_in)
             grads_b[i] = d.sum(0)
             d_next, W_next = d, Ws[i]
         gx = None
-        if ctx.needs_input_grad[1]:  # fast: W (H, n_in) column-major runs ~3x faster
-            gx = d_next.mm(W_next.t().contiguous().t() if ctx.fast else W_next)
+        if ctx.needs_input_grad[1]:
+            gx = d_next.mm(W_next)
         for b in bufs:
             WORKSPACE.give(b)
-        out = [None, gx]
-        for gw, gb in zip(grads_W, grads_b, strict=True):
-            out += [gw, gb]
-        return tuple(out)
+        return _pack(gx, grads_W, grads_b)
+
+
+def _pack(gx, grads_W, grads_b) -> tuple:
+    out = [None, gx]
+    for gw, gb in zip(grads_W, grads_b, strict=True):
+        out += [gw, gb]
+    return tuple(out)
+
+
+def _backward_fast(ctx, g, x, Ws) -> tuple:
+    """Backward of the fast kernels: hs hold s = σ(2a); δ = dL/d(2a) = (dL/ds)·s·(1 - s);
+    dL/dW = 2·δᵀ·h_in with h_in = 2s_in - 1 (4·δᵀ·s_in - 2·(Σδ)·1ᵀ) or x for the first."""
+    hs = ctx.hs
+    n = len(hs)
+    grads_W: list = [None] * len(Ws)
+    grads_b: list = [None] * len(Ws)
+    h_last = WORKSPACE.take(tuple(hs[-1].shape), hs[-1].dtype)
+    torch.add(-1.0, hs[-1], alpha=2.0, out=h_last)  # the head's gᵀ·h from h = 2s - 1 itself:
+    grads_W[-1] = g.t().mm(h_last)  # 2·gᵀ·s - Σg cancels badly
+    WORKSPACE.give(h_last)
+    grads_b[-1] = g.sum(0)
+    bufs = [WORKSPACE.take(tuple(h.shape), h.dtype) for h in hs[:2]]
+    d_next = g
+    W_next = Ws[-1] * 2.0  # dL/ds = d_next·(2·W_out), then (4·W_{i+1}) for the hidden ones
+    for i in range(n - 1, -1, -1):
+        d = bufs[i % len(bufs)]
+        torch.mm(d_next, W_next, out=d)
+        torch.ops.aten.sigmoid_backward(d, hs[i], grad_input=d)
+        col = d.sum(0)
+        if i > 0:
+            corr = (col * -2.0)[:, None].expand(-1, hs[i - 1].shape[1])
+            grads_W[i] = torch.addmm(corr, d.t(), hs[i - 1], alpha=4.0)
+            W_next = (Ws[i] * 4.0).t().contiguous().t()  # column-major: ~10 % faster here
+        else:  # skinny input: (xᵀ·δ)ᵀ runs ~10x faster than δᵀ·x
+            grads_W[i] = x.t().mm(d).t().mul_(2.0)
+            W_next = (Ws[i] * 2.0).t().contiguous().t()  # (H, n_in): ~3x faster
+        grads_b[i] = col * 2.0
+        d_next = d
+    gx = None
+    if ctx.needs_input_grad[1]:
+        gx = d_next.mm(W_next)
+    for b in bufs:
+        WORKSPACE.give(b)
+    return _pack(gx, grads_W, grads_b)
