@@ -52,6 +52,33 @@ def _run(plant, cmds: list[Commands], gear: int) -> np.ndarray:
     return np.array(out)
 
 
+def _factory(chain: str | None, plant: str, latch: bool, seed: int):
+    def model():
+        if plant == "nss":
+            return make_hybrid("nss", chain_path=chain, seed=seed, latch=latch)
+        return ChainPlant(chain)
+
+    return model
+
+
+def rest_holds(
+    seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
+) -> list[dict]:
+    """The standstill: from rest in gear, a full brake request (decel_cmd -0.8 m/s²) held
+    for 3 s; per plant the largest |vx| over the hold and vx at its end (true states)."""
+    model = _factory(chain, plant, latch, seed)
+    rows = []
+    for gear in (1, -1):
+        for steer in (0.0, 360.0):
+            cmds = [Commands(gear, 0.0, -0.8, steer)] * 300
+            res = {}
+            for name, p in (("chain", model()), ("truth", ReferencePlant(seed=seed))):
+                v = _run(p, cmds, gear)[:, 0]
+                res[name] = {"max_abs_vx": float(np.abs(v).max()), "vx_end": float(v[-1])}
+            rows.append({"gear": gear, "steer_deg": steer, **res})
+    return rows
+
+
 def step_tests(
     seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
 ) -> list[dict]:
@@ -60,11 +87,7 @@ def step_tests(
     chain ``chain`` (``plant`` "chain") or of its NSS driven by the truth's actuators
     (``plant`` "nss", with or without the chain's brake-hold latch)."""
 
-    def model():
-        if plant == "nss":
-            return make_hybrid("nss", chain_path=chain, seed=seed, latch=latch)
-        return ChainPlant(chain)
-
+    model = _factory(chain, plant, latch, seed)
     rows = []
     for gear in (1, -1):
         for steer in (0.0, 360.0):
@@ -178,9 +201,10 @@ def main() -> None:
                 st = " ".join(f"{100 * a:+.1f}/{100 * b:+.1f}" for a, b in d[p]["stops"])
                 print(f"  {p:<9} goal {d[p]['goal_cm']:.1f} cm | {st}")
         return
-    steps = step_tests(chain=args.chain, plant=args.plant, latch=not args.no_latch)
+    kw = {"chain": args.chain, "plant": args.plant, "latch": not args.no_latch}
     cells = [] if args.steps_only else [int(c) for c in args.cells.split(",")]
-    doc = {"steps": steps, "replay": [replay(c, chain_path=args.chain) for c in cells]}
+    doc = {"steps": step_tests(**kw), "holds": rest_holds(**kw),
+           "replay": [replay(c, chain_path=args.chain) for c in cells]}  # fmt: skip
     if args.json:
         print(json.dumps(doc, indent=2))
         return
@@ -199,6 +223,13 @@ def main() -> None:
             f"{f(c['vx'])}/{f(t['vx'])} | {f(c['curvature'])}/{f(t['curvature'])} | "
             f"{f(c.get('stop_s'), '.2f')}/{f(t.get('stop_s'), '.2f')} | "
             f"{f(c.get('vx_after_hold'), '.4f')}/{f(t.get('vx_after_hold'), '.4f')}"
+        )
+    print("hold from rest (decel_cmd -0.8, 3 s): gear steer | max |vx| chain/truth | vx end")
+    for r in doc["holds"]:
+        c, t = r["chain"], r["truth"]
+        print(
+            f"{r['gear']:>3} {r['steer_deg']:>5.0f} | {c['max_abs_vx']:.4f}/{t['max_abs_vx']:.4f}"
+            f" | {c['vx_end']:+.4f}/{t['vx_end']:+.4f}"
         )
     for r in doc["replay"]:
         print(
