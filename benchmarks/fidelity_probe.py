@@ -2,8 +2,12 @@
 
     python benchmarks/fidelity_probe.py [--cells 0,26] [--json]
     python benchmarks/fidelity_probe.py --stops 31,12   # per-stop errors of grid cells
+    python benchmarks/fidelity_probe.py --steps-only --chain C [--plant nss [--no-latch]]
 
-Two measurements, both on the shipped chain (models/chain) and the reference vehicle:
+Two measurements, both on the shipped chain (models/chain, or ``--chain C``) and the
+reference vehicle (``--plant nss``: the step tests with the truth's actuators driving the
+chain's NSS, the hybrid of ``parknss fidelity --candidate nss``; ``--no-latch`` without the
+chain's brake-hold latch, so the NSS's own standstill shows):
 
 1. **Step tests** (open loop, from rest in gear, brake released, steering wheel at 0 or
    360° = 90 % of the lock, forward and reverse): the creep (no torque, no brake, 8 s),
@@ -29,6 +33,7 @@ import numpy as np
 
 from parknss.plant import Commands
 from parknss.sim.closed_loop import ClosedLoopConfig
+from parknss.sim.hybrid import make_hybrid
 from parknss.sim.plants import ChainPlant, ReferencePlant
 from parknss.sim.scenarios import grid_scene
 from parknss.sim.session import run_cell
@@ -47,9 +52,42 @@ def _run(plant, cmds: list[Commands], gear: int) -> np.ndarray:
     return np.array(out)
 
 
-def step_tests(seed: int = 5) -> list[dict]:
+def _factory(chain: str | None, plant: str, latch: bool, seed: int):
+    def model():
+        if plant == "nss":
+            return make_hybrid("nss", chain_path=chain, seed=seed, latch=latch)
+        return ChainPlant(chain)
+
+    return model
+
+
+def rest_holds(
+    seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
+) -> list[dict]:
+    """The standstill: from rest in gear, a full brake request (decel_cmd -0.8 m/s²) held
+    for 3 s; per plant the largest |vx| over the hold and vx at its end (true states)."""
+    model = _factory(chain, plant, latch, seed)
+    rows = []
+    for gear in (1, -1):
+        for steer in (0.0, 360.0):
+            cmds = [Commands(gear, 0.0, -0.8, steer)] * 300
+            res = {}
+            for name, p in (("chain", model()), ("truth", ReferencePlant(seed=seed))):
+                v = _run(p, cmds, gear)[:, 0]
+                res[name] = {"max_abs_vx": float(np.abs(v).max()), "vx_end": float(v[-1])}
+            rows.append({"gear": gear, "steer_deg": steer, **res})
+    return rows
+
+
+def step_tests(
+    seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
+) -> list[dict]:
     """Creep (8 s, no torque, no brake), a launch (``torque`` N·m for 2 s from rest) and
-    the stop from the creep under the interface's hold (decel_cmd -0.6 m/s², 3 s)."""
+    the stop from the creep under the interface's hold (decel_cmd -0.6 m/s², 3 s), of the
+    chain ``chain`` (``plant`` "chain") or of its NSS driven by the truth's actuators
+    (``plant`` "nss", with or without the chain's brake-hold latch)."""
+
+    model = _factory(chain, plant, latch, seed)
     rows = []
     for gear in (1, -1):
         for steer in (0.0, 360.0):
@@ -60,8 +98,8 @@ def step_tests(seed: int = 5) -> list[dict]:
                 else:
                     cmds = [Commands(gear, torque, 0.0, steer)] * 200
                 res = {}
-                for name, plant in (("chain", ChainPlant()), ("truth", ReferencePlant(seed=seed))):
-                    s = _run(plant, cmds, gear)
+                for name, p in (("chain", model()), ("truth", ReferencePlant(seed=seed))):
+                    s = _run(p, cmds, gear)
                     end = 799 if torque == 0.0 else 199
                     vx, w = s[end, :2]
                     r = {"vx": float(vx), "curvature": float(w / vx) if abs(vx) > 0.05 else None}
@@ -79,7 +117,7 @@ def step_tests(seed: int = 5) -> list[dict]:
     return rows
 
 
-def replay(cell: int, seed: int = 5) -> dict:
+def replay(cell: int, seed: int = 5, chain_path: str | None = None) -> dict:
     scene = grid_scene(cell)
     cfg = ClosedLoopConfig(plant_seed=seed)
     _, (truth_run,) = run_cell(scene, ["reference"], cfg)
@@ -90,7 +128,7 @@ def replay(cell: int, seed: int = 5) -> dict:
             s["gear_cmd"], s["torque_cmd"], s["decel_cmd"], s["steer_cmd"], strict=True
         )
     ]
-    chain = _run(ChainPlant(), cmds, 0)
+    chain = _run(ChainPlant(chain_path), cmds, 0)
     truth = _run(ReferencePlant(seed=seed), cmds, 0)
     v, dv = truth[:, 0], np.gradient(truth[:, 0]) * 100.0
     a = np.abs(v)
@@ -149,6 +187,11 @@ def main() -> None:
     ap.add_argument("--cells", default="26")
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--stops", default=None, help="cells whose per-stop errors to print")
+    ap.add_argument("--chain", default=None, help="chain artefact (default models/chain)")
+    ap.add_argument("--plant", choices=("chain", "nss"), default="chain",
+                    help="step tests of the chain or of its NSS under the truth's actuators")
+    ap.add_argument("--no-latch", action="store_true", help="--plant nss without the latch")
+    ap.add_argument("--steps-only", action="store_true", help="skip the command replay")
     args = ap.parse_args()
     if args.stops:
         for c in args.stops.split(","):
@@ -158,7 +201,10 @@ def main() -> None:
                 st = " ".join(f"{100 * a:+.1f}/{100 * b:+.1f}" for a, b in d[p]["stops"])
                 print(f"  {p:<9} goal {d[p]['goal_cm']:.1f} cm | {st}")
         return
-    doc = {"steps": step_tests(), "replay": [replay(int(c)) for c in args.cells.split(",")]}
+    kw = {"chain": args.chain, "plant": args.plant, "latch": not args.no_latch}
+    cells = [] if args.steps_only else [int(c) for c in args.cells.split(",")]
+    doc = {"steps": step_tests(**kw), "holds": rest_holds(**kw),
+           "replay": [replay(c, chain_path=args.chain) for c in cells]}  # fmt: skip
     if args.json:
         print(json.dumps(doc, indent=2))
         return
@@ -177,6 +223,13 @@ def main() -> None:
             f"{f(c['vx'])}/{f(t['vx'])} | {f(c['curvature'])}/{f(t['curvature'])} | "
             f"{f(c.get('stop_s'), '.2f')}/{f(t.get('stop_s'), '.2f')} | "
             f"{f(c.get('vx_after_hold'), '.4f')}/{f(t.get('vx_after_hold'), '.4f')}"
+        )
+    print("hold from rest (decel_cmd -0.8, 3 s): gear steer | max |vx| chain/truth | vx end")
+    for r in doc["holds"]:
+        c, t = r["chain"], r["truth"]
+        print(
+            f"{r['gear']:>3} {r['steer_deg']:>5.0f} | {c['max_abs_vx']:.4f}/{t['max_abs_vx']:.4f}"
+            f" | {c['vx_end']:+.4f}/{t['vx_end']:+.4f}"
         )
     for r in doc["replay"]:
         print(

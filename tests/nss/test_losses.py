@@ -12,10 +12,13 @@ from helpers.synth import make_campaign, make_trial, tiny_model
 from parknss.data.trial import Campaign
 from parknss.data.windows import make_windows
 from parknss.nss.batch import make_batch
-from parknss.nss.config import LossConfig
+from parknss.nss.config import LossConfig, NSSConfig, fit_identity
 from parknss.nss.losses import (
+    BlindZoneObservation,
     Targets,
+    blind_zone_observation,
     nss_loss,
+    observed_speed,
     output_loss,
     pointwise,
     state_loss,
@@ -187,3 +190,105 @@ def test_total_applies_lambdas_as_eq8(kind):
     assert float(t0.total) == pytest.approx(float(ls + ly), rel=1e-15)
     assert LossConfig().lambda_vx == 0.1 and LossConfig().lambda_yaw == 0.5
     assert set(terms.as_floats()) == {"total", "state", "output", "vx_dir", "yaw_prior"}
+
+
+# --- loss.blind_zone: observe (the blind zone as part of the observation model) -------------
+
+BZ = kmh_to_ms(0.5)  # the wheel-speed blind zone, m/s
+WIDTH = kmh_to_ms(0.05)  # the default gate width, m/s
+
+
+def test_observed_speed_inside_and_outside_the_zone():
+    v = torch.tensor([0.0, 0.02, 0.05, 0.1, 0.3, 1.0, -0.05, -0.3], dtype=F64)
+    h = observed_speed(v, BZ, WIDTH)
+    # inside the zone the sensor reads ~0 (well below the zone's edge: under 0.5 % of v)
+    inside = v.abs() < BZ - 3 * WIDTH
+    assert torch.all(h[inside].abs() <= 5e-3 * v[inside].abs() + 1e-300)
+    assert float(h[0]) == 0.0
+    # outside it reads the speed, signed
+    outside = v.abs() > BZ + 10 * WIDTH
+    torch.testing.assert_close(h[outside], v[outside], rtol=1e-4, atol=0.0)
+    # odd and monotone in |v|, exactly half the speed at the edge
+    torch.testing.assert_close(observed_speed(-v, BZ, WIDTH), -h, rtol=0.0, atol=0.0)
+    grid = torch.linspace(0.0, 0.5, 501, dtype=F64)
+    assert torch.all(torch.diff(observed_speed(grid, BZ, WIDTH)) >= 0)
+    assert float(observed_speed(torch.tensor(BZ, dtype=F64), BZ, WIDTH)) == pytest.approx(BZ / 2)
+    # homogeneous: the same gate in km/h or in scaled units
+    torch.testing.assert_close(
+        observed_speed(v * 3.6, 0.5, 0.05), h * 3.6, rtol=1e-12, atol=1e-15
+    )
+
+
+def test_observation_model_in_the_scaled_space():
+    """The scaled reading of a scaled prediction is the physical reading, scaled."""
+    tr = make_trial(300, seed=1, gears=(1, -1))
+    m, _ = tiny_model(Campaign([tr]))
+    cfg = LossConfig(blind_zone="observe")
+    obs = blind_zone_observation(cfg, m.vx_zero_s(), m.st_sc[0])
+    v = torch.tensor([[-0.4, -0.1, 0.0, 0.05, 0.13, 0.2, 0.6]], dtype=F64)
+    vx_s = m.normalizer.transform("vx", v, clip=False)
+    want = observed_speed(v, BZ, WIDTH) / m.normalizer.scale_of("vx")
+    torch.testing.assert_close(obs.reading_s(vx_s), want, rtol=1e-10, atol=1e-12)
+
+
+def test_observe_penalises_a_creeping_prediction_and_its_gradient_pushes_it_into_the_zone():
+    # scaled space with s(0) = 0.2 and 1 scaled unit = 1 m/s
+    obs = BlindZoneObservation(0.2, BZ, WIDTH)
+    # sample 0 moving (measured 1.0 m/s, predicted 1.0), samples 1-3 logged in the blind
+    # zone; predicted: creeping at 0.4 m/s (above the zone), 0.05 m/s (inside), 0.0
+    pred = torch.tensor([[1.2, 0.6, 0.25, 0.2]], dtype=F64, requires_grad=True)
+    meas = T(1.2, 0.2, 0.2, 0.2)  # the logged 0 is s(0)
+    valid, moving = T(1.0, 1.0, 1.0, 1.0), T(1.0, 0.0, 0.0, 0.0)
+    t = _targets(meas, T(0, 0, 0, 0), T(0, 0, 0, 0), T(0, 0, 0, 0), T(1, 1, 1, 1), valid, moving)
+    r = _rollout(pred, T(0, 0, 0, 0), T(0, 0, 0, 0), T(0, 0, 0, 0), T(0, 0, 0, 0))
+    loss = state_loss(r, t, "mae", blind=obs)
+    # 4 vx samples + 4 yaw samples; the creeping one costs its reading, ~0.4
+    want = float(observed_speed(torch.tensor([0.4, 0.05], dtype=F64), BZ, WIDTH).sum()) / 8
+    assert float(loss.detach()) == pytest.approx(want, rel=1e-12)
+    assert float(loss.detach()) > 0.4 / 8 * 0.99
+    (g,) = torch.autograd.grad(loss, pred)
+    assert float(g[0, 1]) > 0.1 / 8  # descent lowers the creeping speed
+    assert abs(float(g[0, 2])) < 1e-2 * float(g[0, 1])  # inside the zone: < 1 % of the pull
+    assert float(g[0, 3]) == 0.0
+    # the masked loss does not see the creeping prediction at all
+    (gm,) = torch.autograd.grad(state_loss(r, t, "mae"), pred)
+    assert float(gm[0, 1]) == 0.0
+    # plain gradient descent on the prediction ends inside the zone
+    v = torch.tensor([[0.2 + 0.4]], dtype=F64, requires_grad=True)
+    one = T(1.0)
+    tb = _targets(T(0.2), T(0), T(0), T(0), T(1), one, T(0.0))
+    for _ in range(200):
+        rb = _rollout(v, T(0), T(0), T(0), T(0))
+        (gv,) = torch.autograd.grad(state_loss(rb, tb, "mse", blind=obs), v)
+        v = (v - 0.5 * gv).detach().requires_grad_(True)
+    assert abs(float(v.detach()) - 0.2) < BZ
+
+
+def test_default_blind_zone_mask_is_bit_identical():
+    """`mask` (the default) computes exactly the masked loss it always did, ignores the gate
+    width, and leaves the fit identity (resume fingerprints, store keys) as it was."""
+    camp = make_campaign(150, reps=1)
+    m, cfg = tiny_model(camp, dtype="float32")
+    assert cfg.loss.blind_zone == "mask"
+    tr = make_trial(300, seed=3)
+    b = make_batch(m, make_windows([tr], 120), cfg.loss.blind_zone_kmh)
+    assert 0 < float(b.targets.moving.sum()) < float(b.targets.valid.sum())
+    with torch.no_grad():
+        r = m.rollout(b.x0, b.u)
+    t = b.targets
+    ev, ew = (r.vx_s - t.vx_s).abs(), (r.yaw_s - t.yaw_s).abs()
+    old = ((ev * t.moving).sum() + (ew * t.valid).sum()) / (
+        t.moving.sum() + t.valid.sum()
+    ).clamp(min=1.0)
+    for lc in (cfg.loss, LossConfig(blind_zone_width_kmh=0.3)):
+        terms = nss_loss(r, t, lc, m.vx_zero_s(), m.st_sc[0])
+        assert torch.equal(terms.state, old)
+        assert torch.equal(terms.total, nss_loss(r, t, cfg.loss, m.vx_zero_s()).total)
+    observe = nss_loss(r, t, LossConfig(blind_zone="observe"), m.vx_zero_s(), m.st_sc[0])
+    assert float(observe.state) != float(old)
+    with pytest.raises(ValueError, match="vx scale"):
+        nss_loss(r, t, LossConfig(blind_zone="observe"), m.vx_zero_s())
+    doc = fit_identity(NSSConfig())
+    assert set(doc["loss"]) == {"kind", "lambda_vx", "lambda_yaw", "blind_zone_kmh"}
+    obs_doc = fit_identity(NSSConfig(loss=LossConfig(blind_zone="observe")))
+    assert obs_doc["loss"]["blind_zone"] == "observe" and "blind_zone_width_kmh" in obs_doc["loss"]

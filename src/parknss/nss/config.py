@@ -48,7 +48,18 @@ class LossConfig(StrictModel):
     lambda_vx: float = Field(0.1, ge=0.0, description="weight of the gear-conditioned vx loss")
     lambda_yaw: float = Field(0.5, ge=0.0, description="weight of the yaw-prior loss")
     blind_zone_kmh: float = Field(
-        BLIND_ZONE_KMH, ge=0.0, description="|vx| below this is masked in the state loss"
+        BLIND_ZONE_KMH, ge=0.0, description="the wheel-speed blind zone: a measured |vx| below "
+        "this is a blind-zone sample (masked out of the state loss, or observed)"
+    )
+    blind_zone: Literal["mask", "observe"] = Field(
+        "mask",
+        description="mask: blind-zone samples leave the vx state loss (the paper's); observe: "
+        "they enter it through the sensor's observation model (the predicted reading of v̂x, "
+        "~0 inside the zone, must match the logged 0; nss/losses.py)",
+    )
+    blind_zone_width_kmh: float = Field(
+        0.05, gt=0.0, description="observe: width of the smooth sensor gate around the zone "
+        "edge, km/h (the reading is v·σ((|v| − zone)/width))"
     )
 
 
@@ -174,6 +185,9 @@ def fit_identity(cfg: NSSConfig) -> dict:
         doc["train"].pop("selection", None)
     if cfg.model.fused_kernels == "reference":  # likewise
         doc["model"].pop("fused_kernels", None)
+    if cfg.loss.blind_zone == "mask":  # likewise (the width is read only by observe)
+        doc["loss"].pop("blind_zone", None)
+        doc["loss"].pop("blind_zone_width_kmh", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)

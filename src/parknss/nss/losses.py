@@ -5,6 +5,12 @@
 * L_x^masked: data loss on the states [vx, ω̂_z] (ω̂_z the reconstructed yaw rate); the vx
   component is masked where the measured |vx| < 0.5 km/h (wheel-speed blind zone). The
   mean runs over the unmasked elements of both components together.
+  ``loss.blind_zone: observe`` (not the paper's; default ``mask``) puts the blind-zone
+  samples back through the sensor's observation model: there the wheel-speed sensor reads
+  0, so the predicted *reading* h(v̂x) = v̂x · σ((|v̂x| − b) / w) (b the zone, w
+  ``blind_zone_width_kmh``; ≈ 0 inside the zone, ≈ v̂x outside) is compared with 0. A
+  prediction inside the zone costs ~nothing, one creeping above it costs its speed. The
+  moving samples keep the plain error on v̂x; the mean runs over every valid vx sample.
 * L_y: data loss on the outputs [ax, ay] over all valid samples.
 * L_vx (eq. 6): the gear-conditioned three-branch loss, drive: max(0, -v), reverse:
   max(0, v), neutral/park: |v|, with v the predicted velocity in scaled units measured
@@ -30,6 +36,7 @@ from torch import Tensor
 
 from parknss.nss.config import LossConfig
 from parknss.nss.model import Rollout
+from parknss.signals import kmh_to_ms
 
 LN2 = math.log(2.0)
 
@@ -83,12 +90,54 @@ class LossTerms:
         return {k: float(getattr(self, k).detach()) for k in self.__dataclass_fields__}
 
 
-def state_loss(r: Rollout, t: Targets, kind: str, moving_yaw: bool = False) -> Tensor:
-    """Masked state loss: vx on the moving region, ω̂_z on all valid (or moving) samples."""
+def observed_speed(v: Tensor, zone, width) -> Tensor:
+    """What the wheel-speed sensor reads of a speed v: v · σ((|v| − zone) / width).
+
+    ≈ 0 inside |v| < zone (the blind zone), ≈ v outside, a smooth, differentiable gate of
+    width ``width`` around the edge. Homogeneous: any unit, the same for v, zone and width
+    (m/s, km/h, or scaled units measured from s(0))."""
+    return v * torch.sigmoid((v.abs() - zone) / width)
+
+
+@dataclass
+class BlindZoneObservation:
+    """The sensor's observation model in the scaled space (``loss.blind_zone: observe``).
+
+    zero_s: the scaled image of vx = 0; zone_s, width_s: the blind zone and the gate width
+    divided by the vx scale (scaled units per m/s inverted), so that the observed reading
+    of a scaled prediction, measured from s(0), is ``observed_speed(vx_s - zero_s, ...)``.
+    """
+
+    zero_s: Tensor | float
+    zone_s: Tensor | float
+    width_s: Tensor | float
+
+    def reading_s(self, vx_s: Tensor) -> Tensor:
+        """s(h(v̂x)) − s(0): the predicted reading, scaled, measured from the reading 0."""
+        return observed_speed(vx_s - self.zero_s, self.zone_s, self.width_s)
+
+
+def state_loss(
+    r: Rollout,
+    t: Targets,
+    kind: str,
+    moving_yaw: bool = False,
+    blind: BlindZoneObservation | None = None,
+) -> Tensor:
+    """Masked state loss: vx on the moving region, ω̂_z on all valid (or moving) samples.
+
+    With ``blind`` the blind-zone samples (valid, not moving) enter the vx part too: the
+    predicted reading :meth:`BlindZoneObservation.reading_s` against the sensor's 0."""
     ev = pointwise(r.vx_s - t.vx_s, kind)
     ew = pointwise(r.yaw_s - t.yaw_s, kind)
     mw = t.moving if moving_yaw else t.valid
-    return ((ev * t.moving).sum() + (ew * mw).sum()) / (t.moving.sum() + mw.sum()).clamp(min=1.0)
+    if blind is None:
+        num, den = (ev * t.moving).sum() + (ew * mw).sum(), t.moving.sum() + mw.sum()
+        return num / den.clamp(min=1.0)
+    mb = t.valid - t.moving
+    eb = pointwise(blind.reading_s(r.vx_s), kind)
+    num = (ev * t.moving).sum() + (eb * mb).sum() + (ew * mw).sum()
+    return num / (t.moving.sum() + mb.sum() + mw.sum()).clamp(min=1.0)
 
 
 def output_loss(r: Rollout, t: Targets, kind: str) -> Tensor:
@@ -112,9 +161,26 @@ def yaw_prior_loss(r: Rollout, valid: Tensor) -> Tensor:
     return masked_mean((r.yaw_s - r.yaw_ref_s).abs(), valid)
 
 
-def nss_loss(r: Rollout, t: Targets, cfg: LossConfig, vx_zero_s) -> LossTerms:
-    """The full objective (eq. 8) of a rollout against its targets."""
-    ls = state_loss(r, t, cfg.kind)
+def blind_zone_observation(cfg: LossConfig, vx_zero_s, vx_scale) -> BlindZoneObservation:
+    """The observation model of ``cfg`` for a model whose scaled vx is (vx − off) / vx_scale
+    (vx_scale in m/s per scaled unit)."""
+    sc = abs(vx_scale)
+    return BlindZoneObservation(
+        vx_zero_s, kmh_to_ms(cfg.blind_zone_kmh) / sc, kmh_to_ms(cfg.blind_zone_width_kmh) / sc
+    )
+
+
+def nss_loss(
+    r: Rollout, t: Targets, cfg: LossConfig, vx_zero_s, vx_scale=None
+) -> LossTerms:
+    """The full objective (eq. 8) of a rollout against its targets. ``vx_scale`` (m/s per
+    scaled vx unit) is needed by ``blind_zone: observe`` only."""
+    blind = None
+    if cfg.blind_zone == "observe":
+        if vx_scale is None:
+            raise ValueError("blind_zone 'observe' needs the model's vx scale")
+        blind = blind_zone_observation(cfg, vx_zero_s, vx_scale)
+    ls = state_loss(r, t, cfg.kind, blind=blind)
     ly = output_loss(r, t, cfg.kind)
     lv = velocity_direction_loss(r.vx_s, t.gear, vx_zero_s, t.valid)
     lw = yaw_prior_loss(r, t.valid)

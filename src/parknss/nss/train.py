@@ -118,7 +118,7 @@ def epoch_loss(
 ) -> LossTerms:
     """Roll out every sequence of the batch and evaluate eq. 8."""
     r = model.rollout(batch.x0, batch.u, engine=engine)
-    return nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s())
+    return nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0])
 
 
 def validation_losses(model: NSSModel, batch: Batch, cfg: NSSConfig) -> tuple[float, float]:
