@@ -50,6 +50,40 @@ def register(app: typer.Typer) -> None:
         write_campaign(campaign, out, overwrite=overwrite)
         typer.echo(f"wrote {len(campaign)} trials to {out}", err=True)
 
+    @sub.command("stack", short_help="Trials of the reference car parked by parknss's stack.")
+    def stack(
+        out: Path = typer.Option(..., "--out", help="Folder to write the campaign to."),
+        base: Path | None = typer.Option(None, "--base", help="Campaign the trials are added to "
+                                         "(default: the bundled one)."),
+        no_base: bool = typer.Option(False, "--no-base", help="Write the stack trials alone."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the scene draws and conditions."),
+        repetitions: int | None = typer.Option(None, "--repetitions", help="Trials per class."),
+        vehicle: Path | None = typer.Option(None, "--vehicle", help="Reference-vehicle YAML."),
+        config: Path | None = typer.Option(None, "--config", help="stack_trials YAML."),
+        overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
+    ) -> None:
+        """Park the reference vehicle with parknss's planner, tracker and interface on scenes
+        held out from the fidelity grids; write them as campaign trials (docs/reference.md)."""
+        from parknss.config import BUNDLED_CAMPAIGN
+        from parknss.data.io import read_campaign, write_campaign
+        from parknss.errors import ConfigError
+        from parknss.outputs import check_writable
+        from parknss.reference.params import load_vehicle_params
+        from parknss.sim import stack_trials as st
+
+        if no_base and base is not None:
+            raise ConfigError("--base and --no-base: give one")
+        check_writable(out, overwrite=overwrite, kind="campaign")
+        cfg = st.load_stack_config(config, repetitions)
+        camp = None if no_base else read_campaign(base or BUNDLED_CAMPAIGN)
+        params = load_vehicle_params(vehicle)
+        st.check_base(camp, params)
+        profile = None if camp is None else camp.meta.get("conditions_profile", "none")
+        trials = st.generate_stack_trials(seed, vehicle, cfg, conditions=profile, progress=True)
+        campaign = st.stack_campaign(trials, params, camp, seed, cfg)
+        write_campaign(campaign, out, overwrite=overwrite)
+        typer.echo(f"wrote {len(campaign)} trials ({len(trials)} stack trials) to {out}", err=True)
+
     @sub.command("describe", short_help="Per-trial summary and physics checks.")
     def describe(
         path: Path = typer.Argument(..., help="Campaign folder."),

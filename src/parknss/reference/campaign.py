@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,8 +51,14 @@ def trial_seeds(
     cls = MANEUVER_CLASSES.index(maneuver)
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, cls, int(repetition), int(attempt)])
     plan_seed = int(ss.generate_state(1)[0])
-    noise_ss = np.random.SeedSequence([int(vehicle_seed) & 0xFFFFFFFF, plan_seed])
-    return plan_seed, int(noise_ss.generate_state(1)[0])
+    return plan_seed, noise_seed_of(vehicle_seed, plan_seed)
+
+
+def noise_seed_of(vehicle_seed: int, plan_seed: int) -> int:
+    """The sensor-noise seed of a trial driven from ``plan_seed`` on a vehicle of
+    ``vehicle_seed``."""
+    noise_ss = np.random.SeedSequence([int(vehicle_seed) & 0xFFFFFFFF, int(plan_seed)])
+    return int(noise_ss.generate_state(1)[0])
 
 
 def drive_plan(
@@ -75,13 +82,106 @@ def drive_plan(
         rows.append(car.record())
         cmds.append((c.gear, c.torque_cmd, c.decel_cmd, c.steer_cmd))
         y = car.step(c)
+    return trial_channels(rows, cmds)
+
+
+def trial_channels(
+    rows: list[tuple[float, ...]], cmds: list[tuple[float, float, float, float]] | np.ndarray
+) -> dict[str, np.ndarray]:
+    """The channels of a synthetic trial, (T,) each: row k of ``rows``
+    (:meth:`ReferenceVehicle.record` before command k acts: the logged and ``truth_*``
+    channels, ``gear`` the engaged one) beside command k of ``cmds`` ((T, 4) [gear,
+    torque_cmd, decel_cmd, steer_cmd]; its gear column is not logged), and ``t`` at 100 Hz.
+    The one assembly of every synthetic trial (the APS campaign and the stack trials)."""
     out = records_to_arrays(rows)
-    cmd = np.asarray(cmds, dtype=np.float64)
+    cmd = np.asarray(cmds, dtype=np.float64).reshape(len(rows), len(COMMAND_COLUMNS))
     for j, name in enumerate(COMMAND_COLUMNS):
         if name != "gear":
-            out[name] = cmd[:, j]
+            out[name] = cmd[:, j].copy()
     out["t"] = np.arange(len(rows)) / SAMPLE_RATE_HZ
     return out
+
+
+def synthetic_trial(
+    trial_id: str,
+    maneuver: str,
+    repetition: int,
+    channels: dict[str, np.ndarray],
+    params: ReferenceVehicleParams,
+    provenance: dict,
+    conditions: TrialConditions | None = None,
+    vehicle_hash: str | None = None,
+) -> Trial:
+    """A synthetic trial with the provenance every generated trial carries (generator
+    keys of ``provenance`` first, then synthetic, the vehicle id, parameter digest and
+    YAML SHA-256, and the drawn conditions as ground truth)."""
+    prov = {
+        **provenance,
+        "synthetic": True,
+        "vehicle_id": params.vehicle_id,
+        "vehicle_params_digest": params.digest(),
+        "vehicle_yaml_sha256": vehicle_hash,
+    }
+    if conditions is not None:
+        prov[CONDITIONS_KEY] = conditions.model_dump()
+    return Trial(
+        id=trial_id,
+        maneuver=maneuver,
+        repetition=repetition,
+        channels=channels,
+        vehicle_id=params.vehicle_id,
+        sample_rate_hz=SAMPLE_RATE_HZ,
+        provenance=json.dumps(prov, sort_keys=True),
+    )
+
+
+@dataclass(frozen=True)
+class TrialCar:
+    """The car of one synthetic trial: the vehicle parameters, the noise seed and the
+    trial's conditions (ground truth). Another driver of the reference vehicle (the
+    closed-loop stack of :mod:`parknss.sim.stack_trials`) takes its car from
+    :func:`trial_car` and its trial from :meth:`trial`, so the conditions are drawn and
+    recorded here, the one place, and never read by the driver."""
+
+    params: ReferenceVehicleParams
+    noise_seed: int
+    conditions: TrialConditions | None
+
+    def vehicle(self) -> ReferenceVehicle:
+        """A fresh reference vehicle under the trial's conditions and noise seed."""
+        return ReferenceVehicle(self.params, seed=self.noise_seed, conditions=self.conditions)
+
+    def trial(
+        self,
+        trial_id: str,
+        maneuver: str,
+        repetition: int,
+        channels: dict[str, np.ndarray],
+        provenance: dict,
+        vehicle_hash: str | None = None,
+    ) -> Trial:
+        """The trial of ``channels`` (:func:`trial_channels`) with the common provenance
+        (:func:`synthetic_trial`) and ``noise_seed`` added."""
+        prov = {**provenance, "noise_seed": self.noise_seed}
+        return synthetic_trial(
+            trial_id, maneuver, repetition, channels, self.params, prov, self.conditions,
+            vehicle_hash,
+        )
+
+
+def trial_car(
+    params: ReferenceVehicleParams,
+    seed: int,
+    class_index: int,
+    repetition: int,
+    plan_seed: int,
+    conditions: str | None = None,
+) -> TrialCar:
+    """The car of trial (``seed``, ``class_index``, ``repetition``): conditions drawn from
+    that key under the profile ``conditions`` (default: the YAML's), noise seed from the
+    vehicle seed and ``plan_seed`` as :func:`trial_seeds` derives it."""
+    cond = draw_conditions(params.conditions, seed, class_index, repetition, conditions)
+    return TrialCar(params, noise_seed_of(params.seed, plan_seed), cond)
 
 
 def generate_trial(
@@ -125,26 +225,15 @@ def generate_trial(
     provenance = {
         "generator": GENERATOR,
         "generator_version": GENERATOR_VERSION,
-        "synthetic": True,
         "seed": int(seed),
         "plan_seed": plan_seed,
         "noise_seed": noise_seed,
         "attempt": attempt,
-        "vehicle_id": params.vehicle_id,
-        "vehicle_params_digest": params.digest(),
-        "vehicle_yaml_sha256": vehicle_hash,
         "planned_reversals": plan.reversals,
     }
-    if cond is not None:
-        provenance[CONDITIONS_KEY] = cond.model_dump()
-    return Trial(
-        id=f"{maneuver}_r{repetition}",
-        maneuver=maneuver,
-        repetition=repetition,
-        channels=channels,
-        vehicle_id=params.vehicle_id,
-        sample_rate_hz=SAMPLE_RATE_HZ,
-        provenance=json.dumps(provenance, sort_keys=True),
+    return synthetic_trial(
+        f"{maneuver}_r{repetition}", maneuver, repetition, channels, params, provenance,
+        cond, vehicle_hash,
     )
 
 

@@ -248,16 +248,21 @@ class ReferencePlant(_TruthPlant):
     Args:
         vehicle_yaml: vehicle parameter file (default: the shipped reference_vehicle.yaml).
         seed: sensor-noise seed (None: the file's seed).
+        vehicle: a reference vehicle built elsewhere (a trial's car under its conditions,
+            :mod:`parknss.sim.stack_trials`); ``vehicle_yaml`` and ``seed`` are then unused.
     """
 
     name = "reference"
 
-    def __init__(self, vehicle_yaml: str | Path | None = None, seed: int | None = None):
+    def __init__(
+        self, vehicle_yaml: str | Path | None = None, seed: int | None = None, vehicle=None
+    ):
         from parknss.reference.params import load_vehicle_params
         from parknss.reference.vehicle import ReferenceVehicle
 
-        params = load_vehicle_params(vehicle_yaml or None)
-        self.vehicle = ReferenceVehicle(params, seed=seed)
+        if vehicle is None:
+            vehicle = ReferenceVehicle(load_vehicle_params(vehicle_yaml or None), seed=seed)
+        self.vehicle = vehicle
         self.geom = self.vehicle.geometry
         super().__init__(self.vehicle)
 
