@@ -136,14 +136,14 @@ def read_json(path: str | Path, error: type[Exception] = ConfigError) -> Any:
     return parse_json(text, str(p), error)
 
 
-SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-"""PyYAML's safe loader, in C (libyaml) where available."""
+SAFE_LOADER = yaml.SafeLoader
+"""PyYAML's safe loader, pure Python: libyaml's CSafeLoader crashed the interpreter
+(SIGSEGV inside a load) in the full test suite, where a one-line error is owed."""
 
 
 def parse_yaml(text: str, source: str, error: type[Exception] = ConfigError) -> Any:
-    """``text`` parsed as YAML (the safe loader, libyaml's when PyYAML has it: the same
-    documents, parsed several times faster), or one-line ``error`` naming ``source``: not
-    valid YAML, or nested deeper than :data:`MAX_NESTING`."""
+    """``text`` parsed as YAML (the safe loader), or one-line ``error`` naming ``source``:
+    not valid YAML, or nested deeper than :data:`MAX_NESTING`."""
     try:
         doc = yaml.load(text, Loader=SAFE_LOADER)
     except RecursionError as exc:
