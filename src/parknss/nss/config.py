@@ -190,6 +190,8 @@ def fit_identity(cfg: NSSConfig) -> dict:
     if cfg.loss.blind_zone == "mask":  # likewise (the width is read only by observe)
         doc["loss"].pop("blind_zone", None)
         doc["loss"].pop("blind_zone_width_kmh", None)
+    else:  # an observe fit names its gate's width, at its default too (omit_at_default)
+        doc["loss"]["blind_zone_width_kmh"] = cfg.loss.blind_zone_width_kmh
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)
