@@ -136,16 +136,11 @@ def read_json(path: str | Path, error: type[Exception] = ConfigError) -> Any:
     return parse_json(text, str(p), error)
 
 
-SAFE_LOADER = yaml.SafeLoader
-"""PyYAML's safe loader, pure Python: libyaml's CSafeLoader crashed the interpreter
-(SIGSEGV inside a load) in the full test suite, where a one-line error is owed."""
-
-
 def parse_yaml(text: str, source: str, error: type[Exception] = ConfigError) -> Any:
-    """``text`` parsed as YAML (the safe loader), or one-line ``error`` naming ``source``:
-    not valid YAML, or nested deeper than :data:`MAX_NESTING`."""
+    """``text`` parsed as YAML (safe loader), or one-line ``error`` naming ``source``: not
+    valid YAML, or nested deeper than :data:`MAX_NESTING`."""
     try:
-        doc = yaml.load(text, Loader=SAFE_LOADER)
+        doc = yaml.safe_load(text)
     except RecursionError as exc:
         raise error(f"{source}: nested deeper than {MAX_NESTING} levels; refused") from exc
     except yaml.YAMLError as exc:
