@@ -225,6 +225,32 @@ def test_rates_are_timed_per_engine_class_the_plan_needs(tiny):
         time_rates(data, {}, set(), load_campaign(data), said.append, 0.0, 0.2)
 
 
+def test_a_rate_the_noise_swamped_is_timed_again_at_each_fits_minimum(tiny, monkeypatch):
+    """A deterministic fake fit (1 s + 0.25 s an epoch on a fake CPU clock) whose first
+    1-epoch fit the noise slows past the 6-epoch one: the class is timed again and each
+    fit's minimum gives the true rate; noise on every try still refuses."""
+    import types
+
+    import parknss.experiments.folds as folds
+    import parknss.experiments.plan as plan
+
+    data, _ = tiny
+    clock = [0.0]
+    noise = iter([0.0, 1.5, 0.0, 0.0, 0.0])  # warm-up, 1 (slowed), 6, 1, 6
+
+    def fake_fold_job(kind, fold, data=None, overrides=None):
+        clock[0] += 1.0 + 0.25 * overrides["train"]["epochs"] + next(noise, 0.0)
+
+    monkeypatch.setattr(folds, "fold_job", fake_fold_job)
+    monkeypatch.setattr(plan, "time", types.SimpleNamespace(process_time=lambda: clock[0]))
+    said: list[str] = []
+    rates = plan.time_rates(data, {}, set(), load_campaign(data), said.append, None, 0.2)
+    assert rates.epoch[FUSED] == pytest.approx(0.25) and any("again" in m for m in said)
+    noise = iter([0.0, *[2.0, 0.0] * (1 + plan.TIMING_RETRIES)])  # every 1-epoch fit slowed
+    with pytest.raises(ConfigError, match="non-positive"):
+        plan.time_rates(data, {}, set(), load_campaign(data), said.append, None, 0.2)
+
+
 def test_estimate_counts_a_limiter_fit_and_the_fold_fits_it_answers_once(tiny, tmp_path):
     data, cfg = tiny
     sweep = Sweep(data=data, progress=False)
