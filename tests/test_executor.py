@@ -117,3 +117,50 @@ def test_pool_stores_each_result_as_soon_as_it_finishes():
     res = run_jobs(jobs, workers=2, progress=False, store=store)
     assert [r["seed"] for r in res] == [0, 1, 2, 3]
     assert store.order[-1] == 0 and sorted(store.order) == [0, 1, 2, 3]
+
+
+def _sleep(seconds: float) -> None:
+    import time
+
+    time.sleep(seconds)
+
+
+def test_an_interrupt_behind_a_failed_pool_abort_stops_as_interrupted(monkeypatch):
+    """SIGINT landing while loky's pool starts makes its abort fail with a RuntimeError
+    raised while handling the KeyboardInterrupt: run_jobs raises the interrupt itself
+    (the CLI's exit 130) and no pool worker outlives it."""
+    import multiprocessing
+
+    import joblib
+
+    started: list = []
+
+    class StartingPool:  # what joblib.Parallel does when the signal lands mid-start
+        def __init__(self, **kwargs):
+            pass
+
+        def __call__(self, tasks):
+            proc = multiprocessing.get_context("spawn").Process(target=_sleep, args=(60,))
+            proc.start()
+            started.append(proc)
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt:
+                raise RuntimeError("cannot join thread before it is started")  # noqa: B904
+            yield  # a generator, like Parallel(return_as="generator_unordered")
+
+    monkeypatch.setattr(joblib, "Parallel", StartingPool)
+    jobs = [Job("math:sqrt", {"x": 4.0}), Job("math:sqrt", {"x": 9.0})]
+    with pytest.raises(KeyboardInterrupt):
+        run_jobs(jobs, workers=2, progress=False)
+    assert started and not started[0].is_alive()
+    monkeypatch.undo()  # any other error still goes on as itself
+
+    class FailingPool(StartingPool):
+        def __call__(self, tasks):
+            raise RuntimeError("a worker broke")
+            yield
+
+    monkeypatch.setattr(joblib, "Parallel", FailingPool)
+    with pytest.raises(RuntimeError, match="a worker broke"):
+        run_jobs(jobs, workers=2, progress=False)

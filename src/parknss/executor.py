@@ -17,6 +17,7 @@ A :class:`Tally` counts where the results came from.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import json
@@ -211,9 +212,9 @@ def run_jobs(
             count.computed += 1
             tally.computed += 1
             bar.update(1)
-    finally:  # an interrupt or error between results: stop the pool's workers now
-        stream.close()
-    bar.close()
+    finally:  # an interrupt or error between results: stop the pool's workers now, and
+        stream.close()  # end the bar's line before the command's last line is printed
+        bar.close()
     if progress and store is not None:
         print(f"{desc}: {count.cache} from the run cache, {count.store} from the store, "
               f"{count.computed} computed", file=sys.stderr)
@@ -238,7 +239,42 @@ def _run_local(
     # kills the pool's workers in this thread before the exception goes on
     with parallel_config(backend="loky", inner_max_num_threads=1):
         run = Parallel(n_jobs=workers, return_as="generator_unordered")
-        yield from run(delayed(_execute_indexed)(i, j) for i, j in zip(index, jobs, strict=True))
+        try:
+            yield from run(delayed(_execute_indexed)(i, j)
+                           for i, j in zip(index, jobs, strict=True))
+        except Exception as exc:
+            interrupt = _interrupt_behind(exc)
+            if interrupt is None:
+                raise
+            _kill_pool_workers()
+            raise interrupt from None
+
+
+def _interrupt_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The SIGINT/SIGTERM interrupt ``exc`` was raised while handling, if any. loky's
+    abort fails ("cannot join thread before it is started") when the signal lands while
+    its pool is still starting; the command must still stop as interrupted."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return seen
+        seen = seen.__context__
+    return None
+
+
+def _kill_pool_workers(timeout_s: float = 5.0) -> None:
+    """Kill this process's pool workers (what loky's failed abort left running) and reap
+    them, so none outlives an interrupted command."""
+    import multiprocessing
+    import signal
+
+    children = multiprocessing.active_children()
+    for proc in children:  # loky's Popen has no kill(): signal the pid
+        if proc.pid is not None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(proc.pid, signal.SIGKILL)
+    for proc in children:
+        proc.join(timeout_s)
 
 
 def _execute_indexed(i: int, job: Job) -> tuple[int, Timed]:

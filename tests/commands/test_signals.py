@@ -114,7 +114,7 @@ def test_grid_stops_its_workers(sig, code, word, tmp_path):
         return len(kids) >= 2
 
     rc, lines, _ = _interrupt(argv, started, sig, tmp_path)
-    assert rc == code
+    assert rc == code, "\n".join(lines[-30:])
     line = _one_line(lines, word)
     assert str(out) in line and "run the same command again" in line
     deadline = time.monotonic() + 10
