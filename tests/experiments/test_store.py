@@ -347,6 +347,13 @@ def test_time_to_accuracy_of_two_known_curves():
     assert TTAResult([f], 8.0).met() and not TTAResult([f], 50.0).met()
     doc = f.to_json()
     assert doc["paper"]["best"] == 0.1 and doc["fast"]["best"] == 0.08
+    assert doc["paper"]["best_cpu_s"] == 800.0
+    # a paper fit that peaks early: the speed-up is against its CPU time to its best
+    early = Curve.from_result(fit([100.0, 400.0, 800.0], [0.3, 0.1, 0.2]))
+    e = FoldTTA(0, early, fast, score, score)
+    assert (early.best_cpu_s, e.reach_cpu_s) == (400.0, 20.0)
+    assert (e.speedup_reach, e.speedup_total) == (20.0, 16.0)
+    assert TTAResult([e], 20.0).met() and not TTAResult([e], 21.0).met()
     slow = FoldTTA(0, fast, paper, score, score)  # the other way round: never reaches 0.08
     assert slow.reach_cpu_s is None and not TTAResult([slow], 1.0).met()
     old = fit([10.0, 20.0], [0.2, 0.1])

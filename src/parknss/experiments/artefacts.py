@@ -248,7 +248,7 @@ def time_to_accuracy_artefact(ctx: RunContext) -> ArtefactResult:
     table = Table(
         f"Time to accuracy per CV fold (criterion: held-out moving-region state loss; "
         f"vx (km/h)², ω_z (°/s)²); goal: the paper's error in 1/{res.required_speedup:g} "
-        f"of its CPU time on every fold: {verdict}",
+        f"of its CPU time to that error on every fold: {verdict}",
         COLUMNS,
         res.rows(),
     )

@@ -10,7 +10,9 @@ value the best checkpoint is chosen on; raw and smoothed) at the fit's CPU time.
   at);
 * reach: the CPU time at which the fast fit's smoothed criterion first falls to the target
   (None if it never does);
-* speed-ups: paper CPU time / fast CPU time to reach, and paper / fast total CPU time;
+* speed-ups: the paper fit's CPU time to its own best (the first point at its best smoothed
+  criterion, not its total: a fit that peaks early is charged only what its best cost) /
+  fast CPU time to reach, and paper / fast total CPU time;
 * the Table II scores of both final models (vx, ω_z moving-region MSE) beside them.
 
 CPU time is the fit process's (``time.process_time``, one torch thread), so it does not
@@ -56,6 +58,11 @@ class Curve:
             )
         return cls(list(cpu), list(h["raw"]), list(h["smooth"]), float(res["cpu_s"]))
 
+    @property
+    def best_cpu_s(self) -> float:
+        """CPU time (s) of the first point at the best smoothed criterion."""
+        return self.cpu_s[self.smooth.index(self.best)]
+
     def reach(self, target: float) -> float | None:
         """CPU time (s) of the first point whose smoothed criterion is <= target."""
         return next((c for c, s in zip(self.cpu_s, self.smooth, strict=True) if s <= target), None)
@@ -81,8 +88,9 @@ class FoldTTA:
 
     @property
     def speedup_reach(self) -> float:
+        """The paper fit's CPU time to its own best / the fast fit's CPU time to reach it."""
         r = self.reach_cpu_s
-        return self.paper.total_cpu_s / r if r else math.nan
+        return self.paper.best_cpu_s / r if r else math.nan
 
     @property
     def speedup_total(self) -> float:
@@ -91,6 +99,8 @@ class FoldTTA:
     def to_json(self) -> dict:
         d = asdict(self)
         d["paper"]["best"], d["fast"]["best"] = self.paper.best, self.fast.best
+        d["paper"]["best_cpu_s"], d["fast"]["best_cpu_s"] = (
+            self.paper.best_cpu_s, self.fast.best_cpu_s)
         d.update(
             target=self.target,
             reach_cpu_s=self.reach_cpu_s,
@@ -112,6 +122,7 @@ class TTAResult:
                 [
                     f"fold {f.index}",
                     f.paper.total_cpu_s,
+                    f.paper.best_cpu_s,
                     f.target,
                     f.paper_score.vx,
                     f.paper_score.yaw,
@@ -130,8 +141,8 @@ class TTAResult:
         return out
 
     def met(self) -> bool:
-        """The fast recipe reached the paper's error on every fold within 1/required of its
-        CPU time."""
+        """The fast recipe reached the paper's error on every fold within 1/required of the
+        paper fit's CPU time to that error."""
         return bool(self.folds) and all(
             f.reach_cpu_s is not None and f.speedup_reach >= self.required_speedup
             for f in self.folds
@@ -148,6 +159,7 @@ class TTAResult:
 COLUMNS = [
     "",
     "paper CPU [s]",
+    "paper CPU to best [s]",
     "paper criterion",
     "paper vx",
     "paper ω_z",

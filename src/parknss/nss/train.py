@@ -34,6 +34,7 @@ from parknss.data.trial import Campaign, Trial
 from parknss.data.windows import whole_trials, window_length
 from parknss.errors import DataError, ParknssError
 from parknss.nss import train_state
+from parknss.nss.averaging import WeightAverage
 from parknss.nss.batch import Batch, make_batch
 from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
@@ -198,12 +199,19 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
     crit = "val_state_moving" if val else "train_total"
     hist = History(crit, cfg.train.smooth_window)
     best_state: dict[str, torch.Tensor] | None = None
+    avg = None  # fast.ema: validate and keep a moving average of the weights
+    if recipe.name == "fast" and cfg.fast.ema > 0:
+        avg = WeightAverage(model, cfg.fast.ema)
     start, wall_before, cpu_before = 0, 0.0, 0.0
     out = Path(out_dir) if out_dir is not None else None
     if resume and out is not None and train_state.exists(out):
         st = train_state.load(out, model, opt, fp)
         start, hist, best_state = st.epoch, st.history, st.best
         wall_before, cpu_before = st.wall_s, st.cpu_s
+        if avg is not None:
+            if st.avg is None:
+                raise ParknssError(f"{out}: the training state lacks the weight average")
+            avg.load(st.avg)
     best_epoch, best_value = hist.best()
     E = recipe.steps
     bar = _progress(E, start, progress)
@@ -217,7 +225,11 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
                 row["phase"] = step.phase
             smoothed = None
             if vbatch is not None and step.validate:
-                vs, vy = validation_losses(model, vbatch, cfg)
+                if avg is None:
+                    vs, vy = validation_losses(model, vbatch, cfg)
+                else:
+                    with avg.swapped_in(model):
+                        vs, vy = validation_losses(model, vbatch, cfg)
                 row.update(val_state_moving=vs, val_output=vy)
                 smoothed = hist.add_criterion(e, vs)
             opt.zero_grad(set_to_none=True)
@@ -235,11 +247,16 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
             if smoothed is not None and smoothed < best_value:
                 best_epoch, best_value = e, smoothed
                 best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+                if avg is not None:
+                    best_state.update({k: v.clone() for k, v in avg.avg.items()})
             opt.step()
+            if avg is not None:
+                avg.update(model)
             if out is not None and (e % cfg.train.checkpoint_every == 0 or e == E):
                 wall = wall_before + time.perf_counter() - t0
                 cpu = None if cpu_before is None else cpu_before + time.process_time() - c0
-                train_state.save(out, model, opt, hist, best_state, e, wall, fp, cpu)
+                train_state.save(out, model, opt, hist, best_state, e, wall, fp, cpu,
+                                 None if avg is None else avg.avg)
             bar.update(1)
             bar.set_postfix(loss=f"{row['train_total']:.4f}", best=best_epoch)
             if on_epoch is not None:

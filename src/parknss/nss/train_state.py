@@ -1,7 +1,8 @@
 """The resumable state of a fit: ``train_state.json`` naming its tensor file.
 
 Tensors (current weights ``model/*``, best weights ``best/*``, Adam moments and step
-counts ``opt/<i>/*``, the torch RNG ``rng/torch``) go into a safetensors file named after
+counts ``opt/<i>/*``, the torch RNG ``rng/torch``, the weight average ``avg/*`` of a fit
+with ``fast.ema``) go into a safetensors file named after
 its content, ``train_state.<sha256[:16]>.safetensors``; the step, the history, the
 optimizer's hyper-parameters, the wall and CPU time, a fingerprint of the configuration
 and data, the tensor file's name and its SHA-256 go into ``train_state.json``. A state is
@@ -71,6 +72,7 @@ class State:
     wall_s: float
     cpu_s: float | None  # CPU time of the fit so far; None for a state written without it
     note: str = ""  # non-empty when the newest generation was unusable and the previous used
+    avg: dict[str, torch.Tensor] | None = None  # the weight average (fast.ema), if any
 
 
 def save(
@@ -83,13 +85,17 @@ def save(
     wall_s: float,
     fp: str,
     cpu_s: float | None = None,
+    avg: dict[str, torch.Tensor] | None = None,
 ) -> None:
-    """Write the state after ``epoch`` (weights are θ_{epoch+1}, i.e. after its step)."""
+    """Write the state after ``epoch`` (weights are θ_{epoch+1}, i.e. after its step);
+    ``avg``: the weight average of a fit with ``fast.ema``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     tensors: dict[str, torch.Tensor] = {f"model/{k}": v for k, v in model.state_dict().items()}
     if best is not None:
         tensors.update({f"best/{k}": v for k, v in best.items()})
+    if avg is not None:
+        tensors.update({f"avg/{k}": v for k, v in avg.items()})
     sd = opt.state_dict()
     for i, st in sd["state"].items():
         for k, v in st.items():
@@ -180,6 +186,7 @@ def _restore(meta: dict, t: dict[str, torch.Tensor], model: NSSModel,
              opt: torch.optim.Optimizer, note: str) -> State:
     model.load_state_dict({k[6:]: v for k, v in t.items() if k.startswith("model/")})
     best = {k[5:]: v for k, v in t.items() if k.startswith("best/")} if meta["has_best"] else None
+    avg = {k[4:]: v for k, v in t.items() if k.startswith("avg/")} or None
     state: dict[int, dict] = {}
     for k, v in t.items():
         if k.startswith("opt/"):
@@ -195,4 +202,5 @@ def _restore(meta: dict, t: dict[str, torch.Tensor], model: NSSModel,
         float(meta["wall_s"]),
         None if cpu is None else float(cpu),
         note,
+        avg,
     )
