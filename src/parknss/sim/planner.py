@@ -20,12 +20,11 @@ config with ``steer_reserve: 0`` and ``plan_margin_m: null`` (``parknss plan
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-
-import numpy as np
 
 from parknss.config import override
 from parknss.errors import ParknssError
@@ -195,8 +194,9 @@ def _plan_in(
     without, and a 1e-12 m rounding loses TPCAP case 9, found at 809 of 1200 expansions
     on a knife edge."""
     res, tail, why = _search(scene, cfg, geom)
+    strokes = sum(a.direction != b.direction for a, b in itertools.pairwise(tail)) + bool(tail)
     settings = {"margin_m": cfg.safety_margin_m, "escape_reason": why,
-                "escape_strokes": len(tail)}
+                "escape_strokes": strokes}
     if tail:  # the search ended at the escape's outer end: refine that part only
         scene = replace(scene, goal=tuple(float(v) for v in tail[0].poses[0]))
     if not res.found:
@@ -260,23 +260,25 @@ def _plan_in(
 
 
 ESCAPE_AFTER = ("expansion budget exhausted", "search space exhausted", "time budget exhausted")
-"""Search outcomes after which a boxed goal's slot escape is tried."""
+"""Search outcomes after which the goal's slot escape is tried (``after_failed_search``)."""
 
 
 def _search(scene, cfg: PlanningConfig, geom: VehicleGeometry):
     """Hybrid A* from the start to the goal; when the goal is boxed in
-    (:func:`~parknss.sim.planning.escape.is_boxed`: before searching) or the search ends
-    in one of :data:`ESCAPE_AFTER`, the goal's slot escape
+    (:func:`~parknss.sim.planning.escape.is_boxed`: before searching) or, with
+    ``escape.after_failed_search``, the search ends in one of :data:`ESCAPE_AFTER`, the
+    goal's slot escape
     (:mod:`parknss.sim.planning.escape`) and a search to its outer end instead. Returns
     (search result, the escape's segments driven into the slot (empty if none), why the
     escape ran and how it ended)."""
     ec = cfg.escape
     obstacles = scene.obstacle_arrays()
     boxed = ec.enabled and esc.is_boxed(scene.goal, obstacles, geom, cfg.safety_margin_m, ec)
-    res = None
+    res, deadline = None, time.perf_counter() + cfg.time_budget_s
     if not boxed:
         res = HybridAStar(cfg, geom).plan(scene)
-        if res.found or not ec.enabled or res.reason not in ESCAPE_AFTER or not obstacles:
+        late = ec.enabled and ec.after_failed_search and res.reason in ESCAPE_AFTER
+        if res.found or not late or not obstacles:
             return res, [], ""
     t0 = time.perf_counter()
     out = esc.escape(
@@ -286,6 +288,7 @@ def _search(scene, cfg: PlanningConfig, geom: VehicleGeometry):
         cfg.safety_margin_m,
         ec,
         lambda p: geometry.inside_map(p, geom, scene),
+        deadline,
     )
     why = ("goal boxed in" if boxed else f"search: {res.reason}") + (
         f"; escape: {out.reason}, {len(out.strokes)} strokes, {time.perf_counter() - t0:.2f} s"
@@ -299,7 +302,7 @@ def _search(scene, cfg: PlanningConfig, geom: VehicleGeometry):
         res2.stats.time_s += res.stats.time_s
     if not res2.found:
         return res2, [], why + f"; no path to its end ({res2.reason})"
-    tail = esc.stroke_segments(esc.reversed_strokes(out.strokes), geom)
+    tail = esc.stroke_segments(esc.reversed_strokes(out.strokes), geom, ec.stop_to_steer)
     return res2, tail, why
 
 
@@ -307,26 +310,16 @@ def _with_tail(traj: Trajectory, tail: list[Segment], profiled: bool, scene, geo
                clr: float) -> tuple[Trajectory, float]:
     """``traj`` (ending at the escape's outer end) followed by the escape's segments
     (``profiled``: each with the refinement's trapezoidal speed profile, as a refined plan
-    has), a segment of the same gear merged into ``traj``'s last; and the smaller of
-    ``clr`` and the escape's exact dense clearance."""
+    has; the car stops at the junction even when the gear stays), and the smaller of
+    ``clr`` and the escape's exact dense clearance (-1 when it leaves the map)."""
     from parknss.sim.planning.refine_profile import profile_segment
 
     rc = cfg.refine
-    segs = list(traj.segments)
     tail = [profile_segment(s, rc.speed_max_ms, rc.accel_max_ms2) if profiled else s
             for s in tail]
-    if segs and segs[-1].direction == tail[0].direction:
-        last, first = segs[-1], tail[0]
-        steer = (None if last.steer is None or first.steer is None
-                 else np.concatenate([last.steer, first.steer[1:]]))
-        merged = Segment(np.concatenate([last.poses, first.poses[1:]]), last.direction,
-                         steer=steer)
-        segs[-1] = profile_segment(merged, rc.speed_max_ms, rc.accel_max_ms2) if profiled \
-            else merged
-        tail = tail[1:]
-    info = dict(traj.info, escape_strokes=len(tail))
-    out = Trajectory(segs + tail, source=traj.source, info=info)
-    ok, worst = verify_trajectory(Trajectory(tail or segs[-1:]), scene, geom, cfg)
+    info = dict(traj.info, escape_segments=len(tail))
+    out = Trajectory(list(traj.segments) + tail, source=traj.source, info=info)
+    ok, worst = verify_trajectory(Trajectory(tail), scene, geom, cfg)
     return out, min(clr, worst) if ok or worst >= 0.0 else -1.0
 
 

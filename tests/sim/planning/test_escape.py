@@ -96,8 +96,20 @@ def test_reversed_strokes_drive_back_into_the_slot(car, slot_escape):
     back = esc.reversed_strokes(res.strokes)
     assert np.allclose(back[0].poses[0], res.end) and np.allclose(back[-1].poses[-1], 0.0)
     assert [s.direction for s in back] == [-s.direction for s in reversed(res.strokes)]
+    for s in back:  # driven backwards, each step is still the arc of its curvature
+        step = np.diff(s.poses[:, 2])
+        ds = s.direction * np.hypot(*np.diff(s.poses[:, :2], axis=0).T)
+        assert np.allclose(step, s.kappa[1:] * ds, atol=1e-9)
+    whole = esc.stroke_segments(back, car, stop_to_steer=False)
+    assert len(whole) == len(res.strokes) and all(s.steer is not None for s in whole)
+    # stop_to_steer: cut where the curvature changes, each piece at one steering angle
     segs = esc.stroke_segments(back, car)
-    assert len(segs) == len(res.strokes) and all(s.steer is not None for s in segs)
+    assert len(segs) == sum(len(s.breaks) + 1 for s in back) > len(back)
+    for seg in segs:
+        assert np.ptp(seg.steer) < 1e-9
+        kappa = np.tan(np.radians(seg.steer[0] / car.steer_ratio)) / car.wheelbase
+        dth = seg.poses[-1, 2] - seg.poses[0, 2]
+        assert math.isclose(dth, kappa * seg.direction * seg.length, rel_tol=1e-5)  # chords
 
 
 def test_boxed_in_and_stalled_slots(car):
@@ -116,3 +128,36 @@ def test_no_open_side(car):
              np.array([[-3.0, -half - 0.3], [6.0, -half - 0.3], [6.0, -half], [-3.0, -half]])]
     assert esc.open_side((0.0, 0.0, 0.0), walls, car, MARGIN) == (0, 0.0)
     assert esc.escape((0.0, 0.0, 0.0), walls, car, MARGIN).reason == "no open side"
+
+
+def test_plan_scene_escapes_a_boxed_goal_and_ends_on_it(car):
+    """plan_scene: a goal boxed in (here by a raised ``boxed_run_m``) is escaped first,
+    the search runs to the escape's end and the escape is driven back in, reversed."""
+    from parknss.config import override
+    from parknss.sim.closed_loop import load_closed_loop_config
+    from parknss.sim.planner import plan_scene
+    from parknss.sim.planning.hybrid_astar import load_planning_config
+    from parknss.sim.scenarios import Obstacle, Scene
+
+    obstacles = _slot(car, 0.9)
+    scene = Scene((-12.0, -4.0, 14.0, 10.0), tuple(Obstacle("car", o) for o in obstacles),
+                  (6.0, 3.0, 0.0), (0.0, 0.0, 0.0))
+    loop = override(load_closed_loop_config(), {"plan_margin_m": MARGIN, "steer_reserve": 0.0},
+                    source="test")
+    cfg = override(load_planning_config(), {"escape": {"boxed_run_m": 1.5}}, source="test")
+    plan = plan_scene(scene, loop, cfg, car)
+    assert plan.trajectory is not None, plan.reason
+    assert plan.escape_strokes >= 2 and plan.escape_reason.startswith("goal boxed in")
+    traj = plan.trajectory
+    assert np.allclose(traj.segments[0].poses[0], scene.start, atol=1e-6)
+    assert np.allclose(traj.segments[-1].poses[-1], scene.goal, atol=1e-9)  # exactly in
+    for a, b in zip(traj.segments, traj.segments[1:], strict=False):
+        assert np.allclose(a.poses[-1], b.poses[0], atol=1e-6)
+    assert traj.cusps >= plan.escape_strokes - 1
+    dense = np.concatenate([geometry.densify(s.poses, 0.01, math.radians(0.25))
+                            for s in traj.segments])
+    assert geometry.clearance(dense, car, obstacles).min() >= MARGIN - 1e-6
+    assert plan.min_clearance_m >= MARGIN - 1e-9
+    # disabled: the search alone (the slot is roomy enough for it)
+    off = override(cfg, {"escape": {"enabled": False}}, source="test")
+    assert plan_scene(scene, loop, off, car, refine=False).escape_strokes == 0

@@ -23,7 +23,9 @@ Lengths m, angles rad unless named ``_deg``.
 
 from __future__ import annotations
 
+import itertools
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -40,7 +42,10 @@ from parknss.vehicle import VehicleGeometry, steer_for_curvature
 class EscapeConfig(StrictModel):
     """Slot escape settings (planning.yaml ``escape``). Lengths in m."""
 
-    enabled: bool = Field(True, description="escape a boxed goal/start when the search fails")
+    enabled: bool = Field(True, description="escape a boxed-in goal (is_boxed) before searching")
+    after_failed_search: bool = Field(
+        False, description="also escape the goal when the search fails (unboxed goals)"
+    )
     step_m: float = Field(0.005, gt=0.0, description="sample spacing along a stroke, m")
     max_stroke_m: float = Field(1.0, gt=0.0, description="longest shuffle stroke, m")
     max_strokes: int = Field(300, ge=1, description="give up after this many strokes")
@@ -70,6 +75,10 @@ class EscapeConfig(StrictModel):
     stall_strokes: int = Field(20, ge=1, description="give up when the last this many "
                                "strokes together gained less than stall_m sideways")
     stall_m: float = Field(0.02, ge=0.0, description="see stall_strokes, m")
+    stop_to_steer: bool = Field(
+        True, description="a stroke stops where its curvature changes and the wheel turns "
+        "standing (stroke_segments)"
+    )
     dedupe_m: float = Field(0.002, gt=0.0, description="beam poses closer than this merge, m")
     dedupe_deg: float = Field(0.2, gt=0.0, description="...and in heading, deg")
 
@@ -77,11 +86,13 @@ class EscapeConfig(StrictModel):
 @dataclass
 class Stroke:
     """One stroke: ``direction`` +1/-1, ``poses`` (N, 3) from its start, ``kappa`` (N,)
-    the curvature driven at each pose (1/m, signed as driven)."""
+    the curvature of the arc that reaches each pose (the first: of the arc leaving it;
+    1/m), ``breaks`` the poses where one arc ends and the next begins."""
 
     direction: int
     poses: np.ndarray
     kappa: np.ndarray
+    breaks: tuple[int, ...] = ()  # indices of the poses where the curvature changes
 
     @property
     def length(self) -> float:
@@ -217,6 +228,7 @@ def escape(
     margin: float,
     cfg: EscapeConfig | None = None,
     inside: Callable[[np.ndarray], np.ndarray] | None = None,
+    deadline: float | None = None,
 ) -> EscapeResult:
     """Strokes that take the car from ``pose`` out of its slot (module docstring).
 
@@ -225,6 +237,7 @@ def escape(
         geom: the planner's vehicle (its lock bounds the strokes).
         margin: clearance kept at every pose, m.
         inside: optional (N, 3) world poses -> (N,) bool, the footprint on the map.
+        deadline: optional ``time.perf_counter()`` value after which it gives up.
     """
     cfg = cfg or EscapeConfig()
     side, _ = open_side(pose, obstacles, geom, margin)
@@ -238,6 +251,8 @@ def escape(
     beam: list[tuple[np.ndarray, int, list[Stroke]]] = [(np.zeros(3), 0, [])]
     best, history = 0.0, [0.0]
     for k in range(cfg.max_strokes):
+        if deadline is not None and time.perf_counter() > deadline:
+            return EscapeResult([], f"time budget exhausted after {k} strokes", side, best)
         cand: list[tuple[np.ndarray, int, list[Stroke]]] = []
         for p, last, hist in beam:
             for d in ((1, -1) if last == 0 else (-last,)):
@@ -283,7 +298,8 @@ def _stroke(p, d, parts) -> Stroke:
     """A stroke from ``p``: ``parts`` a list of (poses, kappa) pieces (poses without p)."""
     poses = np.concatenate([p[None, :]] + [q for q, _ in parts], axis=0)
     kappa = np.concatenate([[parts[0][1]]] + [np.full(len(q), k) for q, k in parts])
-    return Stroke(d, poses, kappa)
+    ends = np.cumsum([len(q) for q, _ in parts])[:-1]
+    return Stroke(d, poses, kappa, tuple(int(e) for e in ends))
 
 
 def _strokes(slot: _Slot, p, d: int, two_arcs: bool = True) -> list[Stroke]:
@@ -346,7 +362,8 @@ def _turn_out(slot: _Slot, p, last: int) -> list[Stroke] | None:
 def _world(slot: _Slot, strokes: list[Stroke]) -> list[Stroke]:
     """Local strokes -> world poses and curvatures (mirrored: curvature changes sign)."""
     return [
-        Stroke(s.direction, _to_world(slot.pose, slot.side, s.poses), slot.side * s.kappa)
+        Stroke(s.direction, _to_world(slot.pose, slot.side, s.poses), slot.side * s.kappa,
+               s.breaks)
         for s in strokes
     ]
 
@@ -354,14 +371,29 @@ def _world(slot: _Slot, strokes: list[Stroke]) -> list[Stroke]:
 def reversed_strokes(strokes: list[Stroke]) -> list[Stroke]:
     """The same path driven the other way: last stroke first, each backwards in the other
     gear (the curvature at each pose, hence the steering, unchanged)."""
-    return [Stroke(-s.direction, s.poses[::-1].copy(), s.kappa[::-1].copy())
-            for s in reversed(strokes)]
+    out = []
+    for s in reversed(strokes):
+        n = len(s.poses)
+        kappa = np.empty(n)  # the arc reaching each pose, driven backwards
+        kappa[1:] = s.kappa[::-1][:-1]
+        kappa[0] = kappa[1]
+        out.append(Stroke(-s.direction, s.poses[::-1].copy(), kappa,
+                          tuple(sorted(n - 1 - b for b in s.breaks))))
+    return out
 
 
-def stroke_segments(strokes: list[Stroke], geom: VehicleGeometry) -> list[Segment]:
-    """Strokes as trajectory segments (steering-wheel angle from each pose's curvature)."""
-    return [
-        Segment(s.poses, s.direction,
-                steer=np.asarray(steer_for_curvature(s.kappa, geom), dtype=float))
-        for s in strokes
-    ]
+def stroke_segments(strokes: list[Stroke], geom: VehicleGeometry,
+                    stop_to_steer: bool = True) -> list[Segment]:
+    """Strokes as trajectory segments (steering-wheel angle from the curvature).
+    ``stop_to_steer``: a stroke is cut where its curvature changes, into segments of the
+    same gear: the car stops there and turns the wheel standing (lock to opposite lock
+    takes about a metre of driving at the steering rate, a stroke is centimetres)."""
+    out = []
+    for s in strokes:
+        cuts = [0, *s.breaks, len(s.poses) - 1] if stop_to_steer else [0, len(s.poses) - 1]
+        for a, b in itertools.pairwise(cuts):
+            kappa = s.kappa[a + 1 : b + 1]
+            kappa = np.concatenate([kappa[:1], kappa])
+            out.append(Segment(s.poses[a : b + 1], s.direction,
+                               steer=np.asarray(steer_for_curvature(kappa, geom), dtype=float)))
+    return out
