@@ -145,10 +145,8 @@ class _Slot:
 
     def __init__(self, pose, side, obstacles, geom, margin, cfg, inside):
         self.pose, self.side, self.geom, self.cfg = pose, side, geom, cfg
-        self.obs = [
-            _to_local(pose, side, o)[:: side] if side < 0 else _to_local(pose, side, o)
-            for o in obstacles
-        ]
+        # mirrored (side -1), a CCW polygon comes out clockwise: reversed back to CCW
+        self.obs = [_to_local(pose, side, o)[::side].copy() for o in obstacles]
         self.inside = inside
         self.kmax = 1.0 / geom.min_turning_radius()
         reach = math.hypot(max(geom.length - geom.rear_overhang, geom.rear_overhang),
