@@ -118,6 +118,8 @@ def test_boxed_in_and_stalled_slots(car):
     assert esc.is_boxed((0.0, 0.0, 0.0), tight, car, MARGIN, esc.EscapeConfig())
     res = esc.escape((0.0, 0.0, 0.0), tight, car, MARGIN)
     assert not res.found and res.reason.startswith("stalled") and not res.strokes
+    # a goal inside the margin is the search's to refuse, not boxed in
+    assert not esc.is_boxed((0.0, 0.0, 0.0), tight, car, 0.3, esc.EscapeConfig())
     # roomy: not boxed in
     assert not esc.is_boxed((0.0, 0.0, 0.0), _slot(car, 1.5), car, MARGIN, esc.EscapeConfig())
 

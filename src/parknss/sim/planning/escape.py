@@ -62,7 +62,7 @@ class EscapeConfig(StrictModel):
     )
     drive_out_m: float = Field(4.0, gt=0.0, description="longest drive-out stroke, m")
     boxed_run_m: float = Field(
-        0.4, ge=0.0, description="a pose whose straight runs forward plus back stay below "
+        0.3, ge=0.0, description="a pose whose straight runs forward plus back stay below "
         "this is boxed in: escaped before the search, m (0: only after a failed search)"
     )
     turn_every: int = Field(
@@ -212,8 +212,11 @@ def straight_runs(pose, obstacles, geom: VehicleGeometry, margin: float, limit: 
 
 
 def is_boxed(pose, obstacles, geom: VehicleGeometry, margin: float, cfg: EscapeConfig) -> bool:
-    """True when the straight runs forward plus back stay below ``cfg.boxed_run_m``."""
+    """True when the straight runs forward plus back stay below ``cfg.boxed_run_m``; a
+    pose already inside the margin is not boxed in (the search refuses it)."""
     if cfg.boxed_run_m <= 0.0 or not obstacles:
+        return False
+    if geometry.clearance([pose], geom, obstacles)[0] < margin:
         return False
     f, b = straight_runs(pose, obstacles, geom, margin, limit=cfg.boxed_run_m)
     return f + b < cfg.boxed_run_m
