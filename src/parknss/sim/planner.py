@@ -20,6 +20,7 @@ config with ``steer_reserve: 0`` and ``plan_margin_m: null`` (``parknss plan
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, replace
@@ -27,13 +28,20 @@ from pathlib import Path
 
 from parknss.config import override
 from parknss.errors import ParknssError
+from parknss.sim import geometry
 from parknss.sim import scenarios as sc
 from parknss.sim.closed_loop import ClosedLoopConfig, SimConfigFiles, load_closed_loop_config
+from parknss.sim.planning import escape as esc
 from parknss.sim.planning.frame import CanonicalFrame, snap_scene, snap_trajectory
-from parknss.sim.planning.hybrid_astar import HybridAStar, PlanningConfig, load_planning_config
+from parknss.sim.planning.hybrid_astar import (
+    HybridAStar,
+    PlanningConfig,
+    load_planning_config,
+    verify_trajectory,
+)
 from parknss.sim.planning.refine import refine as refine_path
 from parknss.sim.scene_formats import load_scene
-from parknss.sim.trajectory import Trajectory
+from parknss.sim.trajectory import Segment, Trajectory
 from parknss.vehicle import VehicleGeometry
 
 NO_RESERVE = {"steer_reserve": 0.0, "plan_margin_m": None}
@@ -63,6 +71,8 @@ class Plan:
     steer_reserve: float = 0.0
     margin_m: float | None = None
     vehicle: dict | None = None  # the car planned for (VehicleGeometry.to_dict, full lock)
+    escape_strokes: int = 0  # strokes of the goal's slot escape at the plan's end (escape.py)
+    escape_reason: str = ""  # why the escape ran and how it ended ("" when it did not run)
 
     def to_json(self, scene: sc.Scene) -> dict:
         """The plan summary ``parknss plan --json`` prints (and ``simulate`` reports as
@@ -85,6 +95,8 @@ class Plan:
             "refined": self.refined,
             "refine_reason": self.refine_reason,
             "expansions": self.expansions,
+            "escape_strokes": self.escape_strokes,
+            "escape_reason": self.escape_reason,
             "steer_reserve": self.steer_reserve,
             "margin_m": self.margin_m,
             "vehicle": self.vehicle,
@@ -181,8 +193,12 @@ def _plan_in(
     lengths by up to 1e-3 m). The search takes the scene unrounded: it is invariant
     without, and a 1e-12 m rounding loses TPCAP case 9, found at 809 of 1200 expansions
     on a knife edge."""
-    res = HybridAStar(cfg, geom).plan(scene)
-    settings = {"margin_m": cfg.safety_margin_m}
+    res, tail, why = _search(scene, cfg, geom)
+    strokes = sum(a.direction != b.direction for a, b in itertools.pairwise(tail)) + bool(tail)
+    settings = {"margin_m": cfg.safety_margin_m, "escape_reason": why,
+                "escape_strokes": strokes}
+    if tail:  # the search ended at the escape's outer end: refine that part only
+        scene = replace(scene, goal=tuple(float(v) for v in tail[0].poses[0]))
     if not res.found:
         return Plan(
             None,
@@ -222,10 +238,14 @@ def _plan_in(
                     refine_reason = (
                         f"refined path failed the dense check ({rr.min_clearance_m:.3f} m)"
                     )
+    coarse = res.trajectory
+    if tail:
+        final, clr = _with_tail(final, tail, refined, scene, geom, cfg, clr)
+        coarse = _with_tail(coarse, tail, False, scene, geom, cfg, clr)[0]
     return Plan(
         final,
         "ok",
-        res.trajectory,
+        coarse,
         refined,
         time.perf_counter() - t0,
         clr if math.isfinite(clr) else None,
@@ -237,6 +257,70 @@ def _plan_in(
         expansions=res.stats.expansions,
         **settings,
     )
+
+
+ESCAPE_AFTER = ("expansion budget exhausted", "search space exhausted", "time budget exhausted")
+"""Search outcomes after which the goal's slot escape is tried (``after_failed_search``)."""
+
+
+def _search(scene, cfg: PlanningConfig, geom: VehicleGeometry):
+    """Hybrid A* from the start to the goal; when the goal is boxed in
+    (:func:`~parknss.sim.planning.escape.is_boxed`: before searching) or, with
+    ``escape.after_failed_search``, the search ends in one of :data:`ESCAPE_AFTER`, the
+    goal's slot escape
+    (:mod:`parknss.sim.planning.escape`) and a search to its outer end instead. Returns
+    (search result, the escape's segments driven into the slot (empty if none), why the
+    escape ran and how it ended)."""
+    ec = cfg.escape
+    obstacles = scene.obstacle_arrays()
+    boxed = ec.enabled and esc.is_boxed(scene.goal, obstacles, geom, cfg.safety_margin_m, ec)
+    res, deadline = None, time.perf_counter() + cfg.time_budget_s
+    if not boxed:
+        res = HybridAStar(cfg, geom).plan(scene)
+        late = ec.enabled and ec.after_failed_search and res.reason in ESCAPE_AFTER
+        if res.found or not late or not obstacles:
+            return res, [], ""
+    t0 = time.perf_counter()
+    out = esc.escape(
+        scene.goal,
+        obstacles,
+        geom,
+        cfg.safety_margin_m,
+        ec,
+        lambda p: geometry.inside_map(p, geom, scene),
+        deadline,
+    )
+    why = ("goal boxed in" if boxed else f"search: {res.reason}") + (
+        f"; escape: {out.reason}, {len(out.strokes)} strokes, {time.perf_counter() - t0:.2f} s"
+    )
+    if not out.found:
+        return (res or HybridAStar(cfg, geom).plan(scene)), [], why
+    end = tuple(float(v) for v in out.end)
+    res2 = HybridAStar(cfg, geom).plan(replace(scene, goal=end))
+    if res is not None:
+        res2.stats.expansions += res.stats.expansions
+        res2.stats.time_s += res.stats.time_s
+    if not res2.found:
+        return res2, [], why + f"; no path to its end ({res2.reason})"
+    tail = esc.stroke_segments(esc.reversed_strokes(out.strokes), geom, ec.stop_to_steer)
+    return res2, tail, why
+
+
+def _with_tail(traj: Trajectory, tail: list[Segment], profiled: bool, scene, geom, cfg,
+               clr: float) -> tuple[Trajectory, float]:
+    """``traj`` (ending at the escape's outer end) followed by the escape's segments
+    (``profiled``: each with the refinement's trapezoidal speed profile, as a refined plan
+    has; the car stops at the junction even when the gear stays), and the smaller of
+    ``clr`` and the escape's exact dense clearance (-1 when it leaves the map)."""
+    from parknss.sim.planning.refine_profile import profile_segment
+
+    rc = cfg.refine
+    tail = [profile_segment(s, rc.speed_max_ms, rc.accel_max_ms2) if profiled else s
+            for s in tail]
+    info = dict(traj.info, escape_segments=len(tail))
+    out = Trajectory(list(traj.segments) + tail, source=traj.source, info=info)
+    ok, worst = verify_trajectory(Trajectory(tail), scene, geom, cfg)
+    return out, min(clr, worst) if ok or worst >= 0.0 else -1.0
 
 
 def plan_named_scene(

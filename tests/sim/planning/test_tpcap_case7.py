@@ -94,3 +94,23 @@ def test_case7_needs_at_least_20_strokes_at_the_margin(case7):
     strokes = math.ceil((BOX_Y[1] - w * math.tan(THETA_B)) / per_stroke)
     assert 2.99 < radius < 3.01 and per_stroke < 0.024
     assert strokes >= 20
+
+
+@pytest.mark.slow
+def test_case7_escape_finds_the_way_out_at_the_margin(case7):
+    """The slot escape (planning/escape.py) with the driven plans' steering reserve (10 %):
+    out of the slot keeping 0.10 m at every sampled and densified pose, in at least the
+    certificate's 20 strokes (about 150 measured; ~25 s)."""
+    from dataclasses import replace
+
+    from parknss.sim.planning import escape as esc
+
+    geom, obstacles = case7
+    car = replace(geom, steer_lock_deg=geom.steer_lock_deg * 0.9)
+    res = esc.escape((0.0, 0.0, 0.0), obstacles, car, MARGIN)
+    assert res.found, res.reason
+    assert res.side == 1 and 20 <= len(res.strokes) <= esc.EscapeConfig().max_strokes
+    poses = np.concatenate([s.poses for s in res.strokes])
+    dense = geometry.densify(poses, 0.005, math.radians(0.1))
+    assert geometry.clearance(dense, car, obstacles).min() >= MARGIN
+    assert geometry.clearance([res.end], car, obstacles)[0] >= MARGIN + 0.3 - 1e-9

@@ -56,6 +56,7 @@ from parknss.sim import geometry
 from parknss.sim.geometry import DenseCheckConfig
 from parknss.sim.planning import reeds_shepp as rs
 from parknss.sim.planning.collision_field import FieldChecker
+from parknss.sim.planning.escape import EscapeConfig
 from parknss.sim.planning.frame import CanonicalScene
 from parknss.sim.planning.holonomic import HolonomicGrid, HolonomicHeuristic
 from parknss.sim.planning.refine_config import RefineConfig
@@ -153,6 +154,7 @@ class PlanningConfig(StrictModel):
     )
     dense: DenseCheckConfig = DenseCheckConfig()
     refine: RefineConfig = RefineConfig()
+    escape: EscapeConfig = EscapeConfig()
 
 
 def load_planning_config(path: str | Path | None = None) -> PlanningConfig:
