@@ -22,6 +22,7 @@ from parknss.nss.losses import (
     output_loss,
     pointwise,
     state_loss,
+    torque_gain_loss,
     velocity_direction_loss,
     yaw_prior_loss,
 )
@@ -292,3 +293,71 @@ def test_default_blind_zone_mask_is_bit_identical():
     assert set(doc["loss"]) == {"kind", "lambda_vx", "lambda_yaw", "blind_zone_kmh"}
     obs_doc = fit_identity(NSSConfig(loss=LossConfig(blind_zone="observe")))
     assert obs_doc["loss"]["blind_zone"] == "observe" and "blind_zone_width_kmh" in obs_doc["loss"]
+
+
+def _gain_batch():
+    camp = make_campaign(150, reps=1)
+    m, cfg = tiny_model(camp)
+    b = make_batch(m, make_windows([make_trial(300, seed=3)], 120), cfg.loss.blind_zone_kmh)
+    return m, cfg, b
+
+
+def test_torque_gain_prior_hand_computed():
+    """A state net whose acceleration is linear in the scaled torque along the gear,
+    dvx_s/dt = c·gear·τ_s: the prior is max(0, g_min·Δτ − c·Δτ_s·vx_scale) / ax_scale over
+    the moving samples in gear (both gears); 0 for a gain at or above g_min."""
+    m, _cfg, b = _gain_batch()
+    t = b.targets
+    gear = b.u[..., 0]
+    mask = t.moving * (gear != 0)
+    assert float(mask.sum()) > 0 and float((t.valid * (1 - t.moving)).sum()) > 0
+    assert bool((gear > 0).any()) and bool((gear < 0).any())
+    step_s = 10.0 / float(m.in_sc[1])
+    for c, gmin in ((-2.0, 0.0), (0.5, 0.0), (0.5, 0.02), (0.0, 0.01)):
+        def f(x_s, u_s, c=c):
+            return torch.stack([c * u_s[..., 0] * u_s[..., 1], torch.zeros_like(u_s[..., 1])], -1)
+
+        m.derivative = f  # the instance attribute shadows the method
+        with torch.no_grad():
+            r = m.rollout(b.x0, b.u, engine="eager")
+        lc = LossConfig(lambda_torque=1.0, torque_gain_min=gmin, torque_step_nm=10.0)
+        got = float(torque_gain_loss(m, r, b.u, t, lc))
+        dv = c * gear * step_s * float(m.st_sc[0])  # Δ(dvx/dt), m/s², for a 10 N·m step
+        pen = torch.relu(gmin * 10.0 - torch.sign(gear) * dv)
+        want = float((pen * mask).sum() / mask.sum()) / abs(float(m.out_sc[0]))
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
+        if c > 0 and gmin == 0.0:
+            assert got == 0.0
+        if c < 0:
+            assert got > 0.0
+    assert want > 0.0  # the last case: a gain of 0 against g_min 0.01
+
+
+def test_torque_gain_prior_is_off_by_default_and_trains_the_gain_up():
+    """Off (the default): the loss has no torque term and the fit identity is unchanged.
+    On: gradient steps on the prior alone raise the state net's torque gain."""
+    from parknss.nss.train import epoch_loss
+
+    m, cfg, b = _gain_batch()
+    terms = epoch_loss(m, b, cfg)
+    assert terms.torque_gain is None and "torque_gain" not in terms.as_floats()
+    assert "lambda_torque" not in fit_identity(cfg)["loss"]
+    assert "lambda_torque" not in cfg.loss.model_dump()
+    on = cfg.model_copy(update={"loss": LossConfig(lambda_torque=1.0, torque_gain_min=0.05)})
+    doc = fit_identity(on)["loss"]
+    assert doc["lambda_torque"] == 1.0 and doc["torque_gain_min"] == 0.05
+    assert doc["torque_step_nm"] == 10.0
+    t_on = epoch_loss(m, b, on)
+    assert float(t_on.total) == pytest.approx(float(terms.total) + float(t_on.torque_gain))
+    lc = on.loss
+    first = float(t_on.torque_gain)
+    assert first > 0.0
+    opt = torch.optim.Adam(m.state_net.parameters(), lr=3e-2)
+    with torch.no_grad():
+        r = m.rollout(b.x0, b.u)
+    for _ in range(80):
+        opt.zero_grad()
+        loss = torque_gain_loss(m, r, b.u, b.targets, lc)
+        loss.backward()
+        opt.step()
+    assert float(torque_gain_loss(m, r, b.u, b.targets, lc)) < 0.4 * first

@@ -45,7 +45,10 @@ class LossConfig(StrictModel):
     """Training objective (eq. 8): masked state loss + output loss + λ·physics terms."""
 
     # added after run folders and fits in progress existed: their digests stay as before
-    omit_at_default = frozenset({"blind_zone", "blind_zone_width_kmh"})
+    omit_at_default = frozenset(
+        {"blind_zone", "blind_zone_width_kmh", "lambda_torque", "torque_gain_min",
+         "torque_step_nm"}
+    )
     kind: Literal["mae", "mse", "logcosh"] = "mae"
     lambda_vx: float = Field(0.1, ge=0.0, description="weight of the gear-conditioned vx loss")
     lambda_yaw: float = Field(0.5, ge=0.0, description="weight of the yaw-prior loss")
@@ -62,6 +65,17 @@ class LossConfig(StrictModel):
     blind_zone_width_kmh: float = Field(
         0.05, gt=0.0, description="observe: width of the smooth sensor gate around the zone "
         "edge, km/h (the reading is v·σ((|v| − zone)/width))"
+    )
+    lambda_torque: float = Field(
+        0.0, ge=0.0, description="weight of the torque-gain prior (0: off, the paper's): on "
+        "moving samples in gear, more drive torque must not decelerate the car (nss/losses.py)"
+    )
+    torque_gain_min: float = Field(
+        0.0, ge=0.0, description="torque-gain prior: the least gear·∂(dvx/dt)/∂τ demanded, "
+        "(m/s²)/(N·m) (0: monotone only; the reference car's i/(r·m) is 0.0119)"
+    )
+    torque_step_nm: float = Field(
+        10.0, gt=0.0, description="torque-gain prior: the finite-difference torque step, N·m"
     )
 
 
@@ -198,6 +212,12 @@ def fit_identity(cfg: NSSConfig) -> dict:
         doc["loss"].pop("blind_zone_width_kmh", None)
     else:  # an observe fit names its gate's width, at its default too (omit_at_default)
         doc["loss"]["blind_zone_width_kmh"] = cfg.loss.blind_zone_width_kmh
+    if cfg.loss.lambda_torque > 0.0:  # a fit with the torque-gain prior names its settings
+        doc["loss"]["torque_gain_min"] = cfg.loss.torque_gain_min
+        doc["loss"]["torque_step_nm"] = cfg.loss.torque_step_nm
+    else:  # off: the settings are read by nobody
+        doc["loss"].pop("torque_gain_min", None)
+        doc["loss"].pop("torque_step_nm", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)

@@ -20,6 +20,14 @@
   correct drive velocities).
 * L_ω (eq. 7): |ω̂_z - ω_ref(v̂x, δ_sw)| in scaled yaw units; for the residual readout this
   is |ω_res|.
+* L_τ (``loss.lambda_torque`` > 0; not the paper's, default off): the torque-gain prior.
+  At every moving sample in gear the state net's acceleration is evaluated again with the
+  drive torque raised by Δτ (``torque_step_nm``), at the rollout's state (detached):
+  Δa = a(x̂, τ + Δτ) − a(x̂, τ) in m/s². Physics says gear·Δa ≈ Δτ·i/(r·m) > 0; the
+  penalty is max(0, g_min·Δτ − gear·Δa) / (ax scale) (g_min ``torque_gain_min``,
+  (m/s²)/(N·m); 0: monotone only), averaged over those samples. A campaign driven by a
+  speed-controlling driver anti-correlates torque and speed, and an NSS fitted to it can
+  learn that more torque slows the car (docs/closed_loop.md, "the stop offset").
 
 The data-loss shape is MAE (the paper's), MSE or log-cosh; the physics terms are defined
 with max and |.| by eqs. 6-7 and keep that form. "valid" masks padding (windows shorter
@@ -35,7 +43,7 @@ import torch
 from torch import Tensor
 
 from parknss.nss.config import LossConfig
-from parknss.nss.model import Rollout
+from parknss.nss.model import I_TORQUE, NSSModel, Rollout
 from parknss.signals import kmh_to_ms
 
 LN2 = math.log(2.0)
@@ -85,9 +93,12 @@ class LossTerms:
     output: Tensor
     vx_dir: Tensor
     yaw_prior: Tensor
+    torque_gain: Tensor | None = None  # the torque-gain prior, when on
 
     def as_floats(self) -> dict[str, float]:
-        return {k: float(getattr(self, k).detach()) for k in self.__dataclass_fields__}
+        """The parts as floats (a part that is off, None, is left out)."""
+        vals = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        return {k: float(v.detach()) for k, v in vals.items() if v is not None}
 
 
 def observed_speed(v: Tensor, zone, width) -> Tensor:
@@ -186,3 +197,23 @@ def nss_loss(
     lw = yaw_prior_loss(r, t.valid)
     total = ls + ly + cfg.lambda_vx * lv + cfg.lambda_yaw * lw
     return LossTerms(total, ls, ly, lv, lw)
+
+
+def torque_gain_loss(
+    model: NSSModel, r: Rollout, u: Tensor, t: Targets, cfg: LossConfig
+) -> Tensor:
+    """The torque-gain prior L_τ (module doc) of a rollout ``r`` of ``model`` on the
+    physical inputs ``u`` (B, T, 4); a 0-d tensor in scaled ax units (0 without a moving
+    sample in gear)."""
+    x_s = r.state_s.detach()
+    u_s = model.scale_inputs(u.to(x_s.dtype))
+    step_s = cfg.torque_step_nm / model.in_sc[I_TORQUE]
+    u_hi = u_s.clone()
+    u_hi[..., I_TORQUE] = u_hi[..., I_TORQUE] + step_s
+    a0 = model.derivative(x_s, u_s)[..., 0]
+    a1 = model.derivative(x_s, u_hi)[..., 0]
+    gain = (a1 - a0) * model.st_sc[0]  # Δ(dvx/dt), m/s² for the torque step
+    gear = torch.sign(u[..., 0]).to(gain.dtype)
+    pen = torch.relu(cfg.torque_gain_min * cfg.torque_step_nm - gear * gain)
+    mask = t.moving * (gear != 0).to(gain.dtype)
+    return masked_mean(pen, mask) / model.out_sc[0].abs()

@@ -38,7 +38,13 @@ from parknss.nss.averaging import WeightAverage
 from parknss.nss.batch import Batch, make_batch
 from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
-from parknss.nss.losses import LossTerms, nss_loss, output_loss, state_loss
+from parknss.nss.losses import (
+    LossTerms,
+    nss_loss,
+    output_loss,
+    state_loss,
+    torque_gain_loss,
+)
 from parknss.nss.model import NORMALIZED, NSSModel
 from parknss.nss.recipes import cosine, make_recipe
 from parknss.vehicle import VehicleGeometry
@@ -119,7 +125,12 @@ def epoch_loss(
 ) -> LossTerms:
     """Roll out every sequence of the batch and evaluate eq. 8."""
     r = model.rollout(batch.x0, batch.u, engine=engine)
-    return nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0])
+    terms = nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0])
+    if cfg.loss.lambda_torque > 0.0:  # the torque-gain prior (opt-in; nss/losses.py)
+        lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss)
+        terms.total = terms.total + cfg.loss.lambda_torque * lt
+        terms.torque_gain = lt
+    return terms
 
 
 def validation_losses(model: NSSModel, batch: Batch, cfg: NSSConfig) -> tuple[float, float]:
