@@ -240,8 +240,10 @@ def _plan_in(
                     )
     coarse = res.trajectory
     if tail:
-        final, clr = _with_tail(final, tail, refined, scene, geom, cfg, clr)
-        coarse = _with_tail(coarse, tail, False, scene, geom, cfg, clr)[0]
+        ok, worst = verify_trajectory(Trajectory(tail), scene, geom, cfg)
+        clr = min(clr, worst) if ok or worst >= 0.0 else -1.0  # -1: it leaves the map
+        final = _with_tail(final, tail, refined, cfg)
+        coarse = _with_tail(coarse, tail, False, cfg)
     return Plan(
         final,
         "ok",
@@ -306,21 +308,18 @@ def _search(scene, cfg: PlanningConfig, geom: VehicleGeometry):
     return res2, tail, why
 
 
-def _with_tail(traj: Trajectory, tail: list[Segment], profiled: bool, scene, geom, cfg,
-               clr: float) -> tuple[Trajectory, float]:
+def _with_tail(traj: Trajectory, tail: list[Segment], profiled: bool,
+               cfg: PlanningConfig) -> Trajectory:
     """``traj`` (ending at the escape's outer end) followed by the escape's segments
     (``profiled``: each with the refinement's trapezoidal speed profile, as a refined plan
-    has; the car stops at the junction even when the gear stays), and the smaller of
-    ``clr`` and the escape's exact dense clearance (-1 when it leaves the map)."""
+    has; the car stops at the junction even when the gear stays)."""
     from parknss.sim.planning.refine_profile import profile_segment
 
     rc = cfg.refine
     tail = [profile_segment(s, rc.speed_max_ms, rc.accel_max_ms2) if profiled else s
             for s in tail]
     info = dict(traj.info, escape_segments=len(tail))
-    out = Trajectory(list(traj.segments) + tail, source=traj.source, info=info)
-    ok, worst = verify_trajectory(Trajectory(tail), scene, geom, cfg)
-    return out, min(clr, worst) if ok or worst >= 0.0 else -1.0
+    return Trajectory(list(traj.segments) + tail, source=traj.source, info=info)
 
 
 def plan_named_scene(
