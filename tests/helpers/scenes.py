@@ -27,3 +27,17 @@ def arc_scene() -> tuple[Scene, Trajectory]:
         (-10.0, -10.0, 20.0, 10.0), (Obstacle("car", box),), (0.0, 0.0, 0.0), tuple(arc[-1])
     )
     return scene, traj
+
+
+def shuffle_scene(strokes: int = 20, length: float = 0.15, radius: float = 5.0):
+    """Turn on the spot by ``strokes`` short arcs (m, m), forward on the left lock side and
+    reverse on the right: the slot shuffle's kind of plan, each stroke a few decimetres."""
+    pose, segments = (0.0, 0.0, 0.0), []
+    for i in range(strokes):
+        d = 1 if i % 2 == 0 else -1
+        steps = np.full(15, d * length / 15)
+        poses = integrate_poses(pose, steps, steps * d / radius, dt=1.0)
+        segments.append(Segment(poses, d))
+        pose = tuple(poses[-1])
+    scene = Scene((-10.0, -10.0, 10.0, 10.0), (), (0.0, 0.0, 0.0), pose)
+    return scene, Trajectory(segments, source="test")

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers.scenes import arc_scene
+from helpers.scenes import arc_scene, shuffle_scene
 from parknss.cli import main
+from parknss.config import override
 from parknss.report.sim_figures import draw_scene_run
 from parknss.sim import geometry
 from parknss.sim.closed_loop import ClosedLoopConfig, execute, load_closed_loop_config
@@ -79,8 +80,29 @@ def test_livelock_and_timeout_are_detected():
     assert out.reason == "livelock" and not out.completed
     assert out.duration_s == pytest.approx(2.0, abs=0.02)
     assert out.goal_error_cm == pytest.approx(100 * np.hypot(*np.subtract(scene.goal[:2], 0)))
-    out = execute(scene, traj, KinematicPlant(), ClosedLoopConfig(timeout_s=1.0))
+    fixed = ClosedLoopConfig(timeout_s=1.0, timeout_per_segment_s=0.0)
+    out = execute(scene, traj, KinematicPlant(), fixed)
     assert out.reason == "timeout" and out.duration_s == pytest.approx(1.0)
+    # each segment after the first adds its seconds to the limit (two segments here) ...
+    out = execute(scene, traj, KinematicPlant(), ClosedLoopConfig(timeout_s=1.0))
+    assert out.reason == "timeout" and out.duration_s == pytest.approx(1.0 + 3.0)
+    # ... up to timeout_max_s, and never below timeout_s
+    assert ClosedLoopConfig(timeout_s=1.0, timeout_max_s=2.5).time_limit(traj) == 2.5
+    assert ClosedLoopConfig(timeout_s=9.0, timeout_max_s=2.5).time_limit(traj) == 9.0
+
+
+def test_stroke_level_stop_feedback_keeps_a_shuffle_on_its_plan():
+    """20 strokes of 15 cm: the kinematic plant stops where it is asked to, so a fixed
+    1 cm stop offset loses 1 cm of arc on every stroke and the heading drifts by degrees;
+    fed back, the offset goes to zero after the first stop of each gear."""
+    scene, traj = shuffle_scene()
+    runs = {}
+    for gain in (0.0, 0.5):
+        cfg = override(load_closed_loop_config(), {"tracker": {"stop_adapt_gain": gain}})
+        runs[gain] = execute(scene, traj, KinematicPlant(), cfg)
+        assert runs[gain].completed
+    assert runs[0.0].heading_error_deg > 1.5 and runs[0.0].goal_error_cm > 0.5
+    assert runs[0.5].heading_error_deg < 0.1 and runs[0.5].goal_error_cm < 0.1
 
 
 def test_planned_grid_cell_job_and_summary():

@@ -9,7 +9,8 @@ interface the plant names, until
   pose, in batches of ``collision_every``; the run ends at the first contact);
 * **livelock**: the path progress has not grown by ``livelock_progress_m`` for
   ``livelock_s`` seconds (the car stands or oscillates without getting on);
-* **timeout**: ``timeout_s`` of simulated time.
+* **timeout**: ``timeout_s`` of simulated time plus ``timeout_per_segment_s`` per segment
+  after the first, at most ``timeout_max_s`` (:meth:`ClosedLoopConfig.time_limit`).
 
 The :class:`Outcome` carries the goal position error (cm, rear axle against the scene's
 goal) and heading error (deg), measured at the final pose whatever the reason, the driven
@@ -73,6 +74,12 @@ class ClosedLoopConfig(StrictModel):
     (configs/closed_loop.yaml)."""
 
     timeout_s: float = Field(240.0, gt=0, description="simulated-time limit, s")
+    timeout_per_segment_s: float = Field(
+        3.0, ge=0, description="each gear segment after the first adds this to the limit, s"
+    )
+    timeout_max_s: float = Field(
+        1800.0, gt=0, description="the limit never grows past this (nor below timeout_s), s"
+    )
     livelock_s: float = Field(20.0, gt=0, description="no progress for this long: livelock, s")
     livelock_progress_m: float = Field(0.02, gt=0, description="progress that counts, m")
     collision_every: int = Field(10, ge=1, description="poses per collision batch")
@@ -87,6 +94,16 @@ class ClosedLoopConfig(StrictModel):
         0.2, ge=0, description="planner clearance margin of every plan, m (None: planning.yaml)"
     )
     tracker: TrackerConfig = TrackerConfig()
+
+    omit_at_default = frozenset({"timeout_per_segment_s", "timeout_max_s"})
+
+    def time_limit(self, trajectory: Trajectory) -> float:
+        """Simulated-time limit of driving ``trajectory``, s: ``timeout_s`` plus
+        ``timeout_per_segment_s`` per segment after the first (each stop, gear change and
+        standing steer costs seconds: a 150-stroke slot shuffle takes about 500 s), at most
+        ``timeout_max_s`` (a documented clamp: the recorder allocates the whole run)."""
+        extra = self.timeout_per_segment_s * max(len(trajectory.segments) - 1, 0)
+        return max(self.timeout_s, min(self.timeout_s + extra, self.timeout_max_s))
 
 
 def load_closed_loop_config(path: str | Path | None = None) -> ClosedLoopConfig:
@@ -230,7 +247,7 @@ def execute(
     integ = PoseIntegrator(scene.start, dt)
     obstacles = scene.obstacle_arrays()
     circles = geometry.polygon_circles(obstacles)  # the collision broad phase, once
-    n_max = round(cfg.timeout_s / dt) + 1
+    n_max = round(cfg.time_limit(trajectory) / dt) + 1
     rec = _Recorder(n_max)
     y = plant.reset()
     poses = np.empty((n_max, 3))
