@@ -27,11 +27,19 @@ best times and, last, the median and range of the ratios of paired (back-to-back
 of eager and each fused variant, in wall seconds and in CPU seconds
 (``time.process_time``: on a loaded machine the wall time of an epoch counts the other
 processes' turns, its CPU time much less so).
+
+Last, the arithmetic floor: the multiply-adds of one epoch's matrix products (counted from
+the shapes: the state net's forward, reverse-time and weight-gradient products, the output
+net's three passes), timed at the GEMM rates this machine gives in the same run (the
+per-step B x H x H product for the two recurrences, the stacked (B·T) x H x H product for
+the rest), and the best ratio eager / fused any engine could reach with nothing but those
+products. The load average before and after is printed too (the machine may be shared).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
@@ -95,6 +103,32 @@ class Runner:
             self.cpu.append(dc)
 
 
+def epoch_macs(batch: Batch, m) -> tuple[float, float]:
+    """Multiply-adds of one epoch's products: (the two recurrences' per-step products, the
+    rest), from the shapes alone (B windows x T samples, state net m.state_layers x
+    m.state_units on [x (2), u (4)] -> 2, output net m.output_layers x m.output_units on
+    5 -> 2)."""
+    n_s, n_o = batch.n * (batch.steps - 1), batch.n * batch.steps
+    H, Ho = m.state_units, m.output_units
+    hid = (m.state_layers - 1) * H * H
+    fwd_step = 2 * H + hid + 2 * H  # the x-part of the first layer, hidden layers, head
+    rev_step = 2 * H + hid + 2 * H  # head, hidden layers, first layer's x-part
+    stacked_s = 4 * H + 6 * H + hid + 2 * H  # input projection; weight gradients
+    o_pass = 5 * Ho + (m.output_layers - 1) * Ho * Ho + 2 * Ho
+    return n_s * (fwd_step + rev_step), n_s * stacked_s + n_o * 3 * o_pass
+
+
+def gemm_rate(rows: int, H: int, dtype: torch.dtype, repeats: int) -> float:
+    """Multiply-adds per CPU second of a rows x H x H product into a preallocated out."""
+    a, w = torch.rand(rows, H, dtype=dtype), torch.rand(H, H, dtype=dtype)
+    out = torch.empty(rows, H, dtype=dtype)
+    torch.mm(a, w, out=out)
+    c0 = time.process_time()
+    for _ in range(repeats):
+        torch.mm(a, w, out=out)
+    return rows * H * H * repeats / (time.process_time() - c0)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=None, help="campaign folder (default: generated)")
@@ -104,6 +138,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
+    load0 = os.getloadavg()[0]
     cfg = NSSConfig()
     campaign = load_campaign(a.data)
     norm, batch = paper_batch(cfg, campaign, a.windows, a.length)
@@ -142,6 +177,17 @@ def main() -> None:
             print(f"paired epochs eager/{name} ({'wall' if clock == 'times' else 'CPU'}): median "
                   f"{statistics.median(paired):.2f}x [{min(paired):.2f}-{max(paired):.2f}] over "
                   f"{len(paired)} pairs")
+    rec, rest = epoch_macs(batch, m)
+    dtype = runners["eager"].model.dtype
+    small = gemm_rate(batch.n, m.state_units, dtype, 4000)
+    big = gemm_rate(batch.n * batch.steps, m.state_units, dtype, 5)
+    floor = rec / small + rest / big
+    print(f"arithmetic floor: {(rec + rest) / 1e9:.1f} G multiply-adds an epoch "
+          f"({rec / 1e9:.1f} G in the per-step products at {small / 1e9:.0f} G/s, "
+          f"{rest / 1e9:.1f} G stacked at {big / 1e9:.0f} G/s): {floor:.3f} CPU s; "
+          f"eager CPU best / floor {min(runners['eager'].cpu) / floor:.2f}x")
+    print(f"load average (1 min) {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
+          f"{os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":

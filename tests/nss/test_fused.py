@@ -70,8 +70,9 @@ def test_unknown_kernels_are_refused():
 
 
 @pytest.mark.parametrize("kernels", KERNELS)
-@pytest.mark.parametrize("layers", [1, 2, 3])
-def test_fused_mlp_gradcheck(layers, kernels):
+@pytest.mark.parametrize(("layers", "n_out"), [(1, 2), (2, 2), (3, 2), (2, 1), (2, 5)])
+def test_fused_mlp_gradcheck(layers, n_out, kernels):
+    # n_out <= 4: the fast backward's head product is broadcast (fused_mlp._outer), else mm
     g = torch.Generator().manual_seed(1)
     N, n_in, H = 7, 5, 4
     x = _rand(N, n_in, gen=g)
@@ -80,7 +81,7 @@ def test_fused_mlp_gradcheck(layers, kernels):
     for _ in range(layers):
         params += [_rand(H, width, gen=g), _rand(H, gen=g)]
         width = H
-    params += [_rand(2, H, gen=g), _rand(2, gen=g)]
+    params += [_rand(n_out, H, gen=g), _rand(n_out, gen=g)]
     mlp = functools.partial(FusedTanhMLP.apply, kernels)
     assert torch.autograd.gradcheck(mlp, (x, *params), eps=1e-6, atol=1e-8)
     ref = x
@@ -243,3 +244,27 @@ def test_workspace_rows_are_the_unbound_views_made_once():
     with pytest.raises(ValueError, match="contiguous"):
         ws.rows(a.transpose(2, 3))
 
+
+
+@pytest.mark.parametrize("kernels", KERNELS)
+def test_loops_run_in_inference_mode_but_leave_normal_tensors(kernels):
+    # the per-step loops run under torch.inference_mode (fused._loop); what they return and
+    # the recycled buffers they write must stay normal tensors, so that autograd can save
+    # them and the next epoch can write the buffers again, with the very same numbers
+    x0, U, W0, b0, Wout, bout, hidden = _euler_args(B=3, T=9, H=5, hidden_layers=2)
+    inputs = (x0, U, W0, b0, Wout, bout, *hidden)
+    WORKSPACE.clear()
+    runs = []
+    for _ in range(2):
+        X = FusedEulerRollout.apply(0.1, kernels, *inputs)
+        assert not X.is_inference()
+        grads = torch.autograd.grad((X * X).sum(), inputs)
+        assert not any(t.is_inference() for t in grads)
+        runs.append((X.detach(), grads))
+        del X
+        assert WORKSPACE.free and not any(t.is_inference() for t in WORKSPACE.free)
+    assert torch.equal(runs[0][0], runs[1][0])
+    assert all(torch.equal(a, b) for a, b in zip(runs[0][1], runs[1][1], strict=True))
+    ref = torch.autograd.grad((_euler_reference(0.1, *inputs) ** 2).sum(), inputs)
+    for a, b in zip(runs[0][1], ref, strict=True):
+        torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)
