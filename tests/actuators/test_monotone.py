@@ -148,3 +148,40 @@ def test_default_dumps_and_other_artefacts_omit_the_monolag_fields():
     assert changed.model_dump()["monolag_knots"] == 4
     assert changed.digest() != cfg.digest()
     assert ArchConfig.model_validate(changed.model_dump()) == changed
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_hold_speed_ceiling_keeps_the_hold_off_a_moving_car(seed):
+    """With ``monolag_hold_speed_max_ms`` the gate's threshold stays below the ceiling for
+    every parameter value (even one pushed far up), so a deep request on a car moving
+    clearly above the ceiling never raises the hold floor: torch rollout and NumPy twin
+    alike; the unbounded default keeps its parameter (artefacts read as before)."""
+    v_max = 0.139
+    arch = ArchConfig(monolag_hold_speed_max_ms=v_max)
+    assert ArchConfig.model_validate(arch.artefact_json("monolag")) == arch
+    m = build_candidate(CandidateSpec("brake", "monolag", "phys"), SCALING, arch)
+    m.init_affine(-1.0, 0.0, np.zeros(1))
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for p in m.parameters():
+            p.add_(0.8 * torch.randn(p.shape, generator=g, dtype=p.dtype))
+        m.logit_v_hold.add_(40.0)  # a fit that pushes the threshold up
+        m.rho_hold.fill_(5.0)      # a large floor, so that an armed hold would show
+    assert 0.0 < float(m.hold_speed()) <= v_max
+    cmd = np.r_[np.zeros(50), np.full(350, -0.8)]
+    moving = v_max + 6 * m.v_width
+    with torch.no_grad():
+        H = m.rho_hold.clone()
+        roll = m.rollout(torch.as_tensor(cmd)[None], torch.full((1, len(cmd), 1), moving),
+                         torch.zeros(1))[0].numpy()
+        m.rho_hold.fill_(-40.0)  # no floor at all
+        bare = m.rollout(torch.as_tensor(cmd)[None], torch.full((1, len(cmd), 1), moving),
+                         torch.zeros(1))[0].numpy()
+        m.rho_hold.copy_(H)
+    assert np.abs(roll - bare).max() < 0.05  # bar: the hold does not arm while moving
+    twin = _run(m, cmd, speed=moving)
+    assert np.abs(twin - roll).max() < 1e-6
+    at_rest = _run(m, cmd, speed=0.0)
+    assert at_rest[-1] > twin[-1] + 1.0  # and it does arm at rest
+    default = build_candidate(CandidateSpec("brake", "monolag", "phys"), SCALING, ArchConfig())
+    assert "log_v_hold" in default.state_dict() and "logit_v_hold" not in default.state_dict()

@@ -35,6 +35,10 @@ class ArchConfig(StrictModel):
     monolag_delay_init_s: float = Field(0.1, ge=0.0, description="initial dead time, s")
     monolag_hold_speed_ms: float = Field(0.07, gt=0.0, description="initial standstill "
                                          "threshold of the hold gate (state-aware), m/s")
+    monolag_hold_speed_max_ms: float | None = Field(
+        None, gt=0.0, description="ceiling of the hold gate's standstill threshold, m/s: "
+        "v_h = ceiling·σ(ρ) instead of exp(ρ) (None: unbounded). The wheel-speed blind-zone "
+        "edge (0.139 m/s) keeps the identified hold a standstill hold (docs/actuators.md)")
     monolag_hold_width_ms: float = Field(0.02, gt=0.0, description="width of the hold "
                                          "gate's speed sigmoid, m/s")
     monolag_hold_request: float = Field(0.25, gt=0.0, lt=1.0, description="initial request "

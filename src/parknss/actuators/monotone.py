@@ -13,7 +13,8 @@ has d = -1, so a deeper deceleration request is a larger r):
   (history before k = 0 repeats m[0]);
 * hold (only with a speed feature, ``speed`` or ``vx``: the ``phys`` and ``uniform``
   variants): gate g[k] = σ(β(r[k] - r_h))·σ((v_h - |vx[k]|)/v_w) (armed by a request at
-  standstill), filtered g_f[k+1] = a·g_f[k] + (1 - a)·g[k], g_f[0] = 0,
+  standstill; v_h = exp(ρ_v), or v_max·σ(ρ_v) below a ceiling ``monolag_hold_speed_max_ms``),
+  filtered g_f[k+1] = a·g_f[k] + (1 - a)·g[k], g_f[0] = 0,
   a = exp(-dt/τ_on) while g[k] > g_f[k] (engaging), else exp(-dt/τ_off) (releasing, as
   the car ramps its hold out at a launch); target t = max(m_d, b + H·g_f), H = sp(ρ_H)
   >= 0: the pressure floor of the chassis auto-hold, which no command explains;
@@ -93,8 +94,14 @@ class MonoLag(ActuatorModel):
             self.rho_hold = nn.Parameter(torch.tensor(inv_softplus(0.5), dtype=f64))
             r_h = 2.0 * cfg.monolag_hold_request - 1.0  # fraction of the domain -> scaled r
             self.r_hold = nn.Parameter(torch.tensor(r_h, dtype=f64))
-            self.log_v_hold = nn.Parameter(
-                torch.tensor(math.log(cfg.monolag_hold_speed_ms), dtype=f64))
+            self.v_hold_max = cfg.monolag_hold_speed_max_ms
+            v0 = float(cfg.monolag_hold_speed_ms)
+            if self.v_hold_max is None:
+                self.log_v_hold = nn.Parameter(torch.tensor(math.log(v0), dtype=f64))
+            else:  # bounded: v_h = v_max·σ(ρ), started at v0 (or near the ceiling)
+                frac = min(max(v0 / self.v_hold_max, 1e-3), 1 - 1e-3)
+                self.logit_v_hold = nn.Parameter(
+                    torch.tensor(math.log(frac / (1 - frac)), dtype=f64))
             self.log_tau_hold = nn.Parameter(
                 torch.tensor(math.log(cfg.monolag_hold_tau_s), dtype=f64))
             self.log_tau_release = nn.Parameter(
@@ -124,7 +131,7 @@ class MonoLag(ActuatorModel):
             if self.hold:
                 speed = np.abs(fs[:, self.speed_idx] * self.scaling.f_sc[self.speed_idx]
                                + self.scaling.f_off[self.speed_idx])
-                armed = (speed < math.exp(float(self.log_v_hold))) & (r > float(self.r_hold))
+                armed = (speed < float(self.hold_speed())) & (r > float(self.r_hold))
                 excess = ys[armed] - float(self.b) if armed.any() else np.zeros(1)
                 floor = float(np.median(excess)) if excess.size else 0.0
                 self.rho_hold.fill_(inv_softplus(max(floor, 0.05)))
@@ -150,11 +157,18 @@ class MonoLag(ActuatorModel):
         """(A (2, 2), Bv (2,)) of the lag, ζ = 1 + sp(ρ_ζ)."""
         return lag2_discrete(self.log_tau2, torch.log(1.0 + softplus(self.rho_zeta)), self.dt)
 
+    def hold_speed(self) -> Tensor:
+        """The hold gate's standstill threshold v_h in m/s (0-d): exp(ρ_v), or
+        v_max·σ(ρ_v) < v_max with a ceiling (``monolag_hold_speed_max_ms``)."""
+        if self.v_hold_max is None:
+            return torch.exp(self.log_v_hold)
+        return self.v_hold_max * torch.sigmoid(self.logit_v_hold)
+
     def gate(self, r: Tensor, feat: Tensor | None) -> Tensor:
         """The hold's arming gate g (same shape as r) from physical features (..., F)."""
         speed = torch.zeros_like(r) if feat is None else torch.abs(feat[..., self.speed_idx])
         armed = torch.sigmoid(self.beta * (r - self.r_hold))
-        still = torch.sigmoid((torch.exp(self.log_v_hold) - speed) / self.v_width)
+        still = torch.sigmoid((self.hold_speed() - speed) / self.v_width)
         return armed * still
 
     def hold_poles(self) -> tuple[Tensor, Tensor]:

@@ -221,7 +221,7 @@ class MonoLagStepper(Stepper):
             self.idx = model.speed_idx
             self.H = _softplus(float(p["rho_hold"]))
             self.r_h = float(p["r_hold"])
-            self.v_h = math.exp(float(p["log_v_hold"]))
+            self.v_h = float(model.hold_speed().detach())
             self.v_w = model.v_width
             self.a_on = math.exp(-self.dt * math.exp(-float(p["log_tau_hold"])))
             self.a_off = math.exp(-self.dt * math.exp(-float(p["log_tau_release"])))
