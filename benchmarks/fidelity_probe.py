@@ -3,6 +3,7 @@
     python benchmarks/fidelity_probe.py [--cells 0,26] [--json]
     python benchmarks/fidelity_probe.py --stops 31,12   # per-stop errors of grid cells
     python benchmarks/fidelity_probe.py --steps-only --chain C [--plant nss [--no-latch]]
+    python benchmarks/fidelity_probe.py --torque --chain C [--plant nss]  # the torque trap
 
 Two measurements, both on the shipped chain (models/chain, or ``--chain C``) and the
 reference vehicle (``--plant nss``: the step tests with the truth's actuators driving the
@@ -15,6 +16,12 @@ chain's brake-hold latch, so the NSS's own standstill shows):
    launch (15 or 30 N·m for 2 s). Per test: the speed reached, the curvature ω/vx, the
    time to stop (true |vx| < 0.01 m/s; "-" if still moving) and the speed left after the
    hold, chain against truth (true states of both).
+   ``--torque``: the torque trap (docs/closed_loop.md, "the chain's stop offset"): from
+   rest, 28 N·m for 1 s, then a constant 15 / 30 / 45 / 60 / 85 N·m, brake released, in
+   both gears at 0 and 360°; the true vx at 3 and 7 s. The truth's speed rises with the
+   torque; a chain whose speed falls as the torque rises has a speed attractor that a
+   speed controller winds into. Passes when vx at 7 s rises with the torque in every
+   gear and steering angle, for the chain.
 2. **Command replay**: a grid cell is driven in closed loop under the truth; its
    recorded command sequence (gear, torque, deceleration, steering) is replayed open loop
    into the chain and into a fresh truth of the same seed (which reproduces the run).
@@ -27,6 +34,7 @@ chain's brake-hold latch, so the NSS's own standstill shows):
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 
 import numpy as np
@@ -117,6 +125,32 @@ def step_tests(
     return rows
 
 
+TRAP_TORQUES = (15.0, 30.0, 45.0, 60.0, 85.0)
+
+
+def torque_trap(
+    seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
+) -> list[dict]:
+    """The torque trap (module doc, ``--torque``): per gear and steering angle, the true vx
+    at 3 s and 7 s for each torque of ``TRAP_TORQUES``, chain and truth, and whether the
+    chain's vx at 7 s rises with the torque (strictly, in the gear's direction)."""
+    model = _factory(chain, plant, latch, seed)
+    rows = []
+    for gear in (1, -1):
+        for steer in (0.0, 360.0):
+            res: dict[str, list] = {"chain": [], "truth": []}
+            for torque in TRAP_TORQUES:
+                cmds = [Commands(gear, 28.0, 0.0, steer)] * 100
+                cmds += [Commands(gear, torque, 0.0, steer)] * 601
+                for name, p in (("chain", model()), ("truth", ReferencePlant(seed=seed))):
+                    v = _run(p, cmds, gear)[:, 0]
+                    res[name].append((float(v[300]), float(v[700])))
+            end = [gear * v7 for _, v7 in res["chain"]]
+            mono = all(b > a for a, b in itertools.pairwise(end))
+            rows.append({"gear": gear, "steer_deg": steer, "monotone": mono, **res})
+    return rows
+
+
 def replay(cell: int, seed: int = 5, chain_path: str | None = None) -> dict:
     scene = grid_scene(cell)
     cfg = ClosedLoopConfig(plant_seed=seed)
@@ -192,7 +226,22 @@ def main() -> None:
                     help="step tests of the chain or of its NSS under the truth's actuators")
     ap.add_argument("--no-latch", action="store_true", help="--plant nss without the latch")
     ap.add_argument("--steps-only", action="store_true", help="skip the command replay")
+    ap.add_argument("--torque", action="store_true", help="the torque trap only")
     args = ap.parse_args()
+    if args.torque:
+        rows = torque_trap(chain=args.chain, plant=args.plant, latch=not args.no_latch)
+        if args.json:
+            print(json.dumps(rows, indent=2))
+            return
+        print("torque trap (true vx at 7 s, m/s) at " + " / ".join(f"{t:.0f}" for t in
+              TRAP_TORQUES) + " N·m: gear steer | chain | truth | chain rises with torque")
+        for r in rows:
+            c = " / ".join(f"{v7:+.3f}" for _, v7 in r["chain"])
+            t = " / ".join(f"{v7:+.2f}" for _, v7 in r["truth"])
+            print(f"{r['gear']:>3} {r['steer_deg']:>5.0f} | {c} | {t} | "
+                  f"{'yes' if r['monotone'] else 'NO'}")
+        print("passes" if all(r["monotone"] for r in rows) else "FAILS: the trap is there")
+        return
     if args.stops:
         for c in args.stops.split(","):
             d = stop_errors(int(c))
