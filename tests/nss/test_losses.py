@@ -17,6 +17,7 @@ from parknss.nss.losses import (
     BlindZoneObservation,
     Targets,
     blind_zone_observation,
+    decoupling_loss,
     envelope_points,
     nss_loss,
     observed_speed,
@@ -432,3 +433,37 @@ def test_torque_prior_envelope_reaches_a_trap_the_logged_samples_miss():
     dv = (f(x_s, u_hi)[:, 0] - f(x_s, u_s)[:, 0]) * m.st_sc[0]
     want = float(torch.relu(-gear * dv).mean()) / abs(float(m.out_sc[0]))
     assert got["envelope"] == pytest.approx(want, rel=1e-9)
+
+
+def test_decoupling_prior_penalises_the_yaw_state_as_a_hidden_speed_regulator():
+    """A state net whose acceleration reads the second state (a = k·s2, the hidden speed
+    regulator of docs/closed_loop.md) is penalised by max(0, |k·Δs2|·vx_scale − tol)
+    averaged over the envelope, by hand; one that does not read it (or within the
+    tolerance) costs 0; off by default, and an 'on' fit names its settings."""
+    m, cfg, b = _gain_batch()
+    lc = LossConfig(lambda_decouple=1.0, decouple_tolerance_ms2=0.05, torque_prior_samples=500)
+    x_s, _u_s, _gear = envelope_points(m, lc, seed=2)
+    shift = 2.0 * torch.rand(len(x_s), generator=torch.Generator().manual_seed(3),
+                             dtype=torch.float64) - 1.0
+    vsc = abs(float(m.st_sc[0]))
+    for k in (0.0, 0.04 / vsc, 1.0):
+        def f(x, u, k=k):
+            return torch.stack([k * x[..., 1] + u[..., 1], torch.zeros_like(u[..., 1])], -1)
+
+        m.derivative = f
+        got = float(decoupling_loss(m, lc, seed=2))
+        want = float(torch.relu((k * shift).abs() * vsc - 0.05).mean()) / abs(float(m.out_sc[0]))
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-15)
+        assert (got == 0.0) == (k * vsc <= 0.05)
+    assert got > 0.0
+    assert "lambda_decouple" not in fit_identity(cfg)["loss"]
+    doc = fit_identity(NSSConfig(loss=lc))["loss"]
+    assert doc["lambda_decouple"] == 1.0 and doc["decouple_tolerance_ms2"] == 0.05
+    assert doc["torque_prior_samples"] == 500
+    from parknss.nss.train import epoch_loss
+
+    del m.derivative
+    on = cfg.model_copy(update={"loss": lc})
+    t_on = epoch_loss(m, b, on)
+    assert t_on.decouple is not None and "decouple" in t_on.as_floats()
+    assert epoch_loss(m, b, cfg).decouple is None

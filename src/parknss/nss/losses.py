@@ -33,6 +33,15 @@
   normalizer's range with the brake released, :func:`envelope_points`: the steady torque
   far above what a speed needs, which such a driver never logs and where the trap was
   found) or ``both`` (the mean of the two).
+* L_c (``loss.lambda_decouple`` > 0; not the paper's, default off): the yaw-state
+  decoupling prior. The second state (ω_res, or ω_z for direct yaw) is the model's only
+  other memory, and a fit can use it as a hidden speed regulator: a residual of 0.01
+  scaled units (0.1 °/s) that cancels 1 m/s² of drive acceleration holds the speed at the
+  campaign's cruise whatever the torque (the torque trap, docs/closed_loop.md). At the
+  envelope's points (:func:`envelope_points`) the second state is moved over the yaw
+  range and max(0, |Δ(dvx/dt)| − ``decouple_tolerance_ms2``) / (ax scale) is averaged:
+  at parking speeds the car's longitudinal acceleration does not depend on its yaw
+  state beyond cornering drag (a few hundredths of m/s²).
 
 The data-loss shape is MAE (the paper's), MSE or log-cosh; the physics terms are defined
 with max and |.| by eqs. 6-7 and keep that form. "valid" masks padding (windows shorter
@@ -99,6 +108,7 @@ class LossTerms:
     vx_dir: Tensor
     yaw_prior: Tensor
     torque_gain: Tensor | None = None  # the torque-gain prior, when on
+    decouple: Tensor | None = None  # the yaw-state decoupling prior, when on
 
     def as_floats(self) -> dict[str, float]:
         """The parts as floats (a part that is off, None, is left out)."""
@@ -288,3 +298,23 @@ def torque_gain_loss(
         else:
             parts.append(torch.zeros((), dtype=model.dtype))
     return sum(parts[1:], parts[0]) / len(parts) / model.out_sc[0].abs()
+
+
+def decoupling_loss(model: NSSModel, cfg: LossConfig, seed: int = 0) -> Tensor:
+    """The yaw-state decoupling prior L_c (module doc) at the envelope's points
+    (:func:`envelope_points`, drawn under ``seed``): the second state is moved from the
+    kinematic prior to a value drawn uniformly over the scaled yaw range [-1, 1] around it
+    (seeded by ``seed`` + 1), and the change of dvx/dt beyond ``decouple_tolerance_ms2`` is
+    penalised; a 0-d tensor in scaled ax units (0 for an empty envelope)."""
+    x_s, u_s, _gear = envelope_points(model, cfg, seed)
+    if not len(x_s):
+        return torch.zeros((), dtype=model.dtype)
+    gen = torch.Generator().manual_seed(int(seed) + 1)
+    shift = 2.0 * torch.rand(len(x_s), generator=gen, dtype=torch.float64) - 1.0
+    x_r = x_s.clone()
+    x_r[:, 1] = x_r[:, 1] + shift.to(x_s.dtype)
+    a_ref = model.derivative(x_s, u_s)[:, 0]
+    a_r = model.derivative(x_r, u_s)[:, 0]
+    change = (a_r - a_ref).abs() * model.st_sc[0].abs()  # m/s²
+    pen = torch.relu(change - cfg.decouple_tolerance_ms2)
+    return pen.mean() / model.out_sc[0].abs()

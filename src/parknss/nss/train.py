@@ -40,6 +40,7 @@ from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
 from parknss.nss.losses import (
     LossTerms,
+    decoupling_loss,
     nss_loss,
     output_loss,
     state_loss,
@@ -130,6 +131,10 @@ def epoch_loss(
         lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss, cfg.train.seed)
         terms.total = terms.total + cfg.loss.lambda_torque * lt
         terms.torque_gain = lt
+    if cfg.loss.lambda_decouple > 0.0:  # the yaw-state decoupling prior (opt-in)
+        lc = decoupling_loss(model, cfg.loss, cfg.train.seed)
+        terms.total = terms.total + cfg.loss.lambda_decouple * lc
+        terms.decouple = lc
     return terms
 
 
