@@ -3,6 +3,7 @@
     python benchmarks/fidelity_probe.py [--cells 0,26] [--json]
     python benchmarks/fidelity_probe.py --stops 31,12   # per-stop errors of grid cells
     python benchmarks/fidelity_probe.py --steps-only --chain C [--plant nss [--no-latch]]
+    python benchmarks/fidelity_probe.py --torque --chain C [--plant nss]  # the torque trap
 
 Two measurements, both on the shipped chain (models/chain, or ``--chain C``) and the
 reference vehicle (``--plant nss``: the step tests with the truth's actuators driving the
@@ -15,6 +16,17 @@ chain's brake-hold latch, so the NSS's own standstill shows):
    launch (15 or 30 N·m for 2 s). Per test: the speed reached, the curvature ω/vx, the
    time to stop (true |vx| < 0.01 m/s; "-" if still moving) and the speed left after the
    hold, chain against truth (true states of both).
+   ``--torque``: the torque trap (docs/closed_loop.md, "the chain's stop offset"): from
+   rest, 28 N·m for 1 s, then a constant 15 / 30 / 45 / 60 / 85 N·m, brake released, in
+   both gears at 0 and 360°; the true vx at 3 and 7 s. The truth's speed rises with the
+   torque; a chain whose speed falls as the torque rises has a speed attractor that a
+   speed controller winds into. Passes when vx at 7 s rises with the torque in every
+   gear and steering angle, for the chain. Below it, the chain's NSS alone (its own
+   rollout, the same torques as its input, steering 0): vx and the second state at 7 s,
+   dvx/dt there and with the second state put back on the kinematic prior (ω_res = 0),
+   and the torque gain d(dvx/dt)/dτ at the state. A steady speed held by the second
+   state (dvx/dt ≈ 0 at the state, far from 0 on the prior) is the hidden speed
+   regulator that ``loss.lambda_decouple`` penalises (docs/nss.md).
 2. **Command replay**: a grid cell is driven in closed loop under the truth; its
    recorded command sequence (gear, torque, deceleration, steering) is replayed open loop
    into the chain and into a fresh truth of the same seed (which reproduces the run).
@@ -27,7 +39,9 @@ chain's brake-hold latch, so the NSS's own standstill shows):
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -117,6 +131,70 @@ def step_tests(
     return rows
 
 
+TRAP_TORQUES = (15.0, 30.0, 45.0, 60.0, 85.0)
+
+
+def torque_trap(
+    seed: int = 5, chain: str | None = None, plant: str = "chain", latch: bool = True
+) -> list[dict]:
+    """The torque trap (module doc, ``--torque``): per gear and steering angle, the true vx
+    at 3 s and 7 s for each torque of ``TRAP_TORQUES``, chain and truth, and whether the
+    chain's vx at 7 s rises with the torque (strictly, in the gear's direction)."""
+    model = _factory(chain, plant, latch, seed)
+    rows = []
+    for gear in (1, -1):
+        for steer in (0.0, 360.0):
+            res: dict[str, list] = {"chain": [], "truth": []}
+            for torque in TRAP_TORQUES:
+                cmds = [Commands(gear, 28.0, 0.0, steer)] * 100
+                cmds += [Commands(gear, torque, 0.0, steer)] * 601
+                for name, p in (("chain", model()), ("truth", ReferencePlant(seed=seed))):
+                    v = _run(p, cmds, gear)[:, 0]
+                    res[name].append((float(v[300]), float(v[700])))
+            end = [gear * v7 for _, v7 in res["chain"]]
+            mono = all(b > a for a, b in itertools.pairwise(end))
+            rows.append({"gear": gear, "steer_deg": steer, "monotone": mono, **res})
+    return rows
+
+
+def regulator(chain: str | None = None) -> list[dict]:
+    """The chain's NSS alone (``<chain>/nss``), open loop from rest: 28 N·m for 1 s, then
+    each torque of ``TRAP_TORQUES`` for 6 s, brake released, steering 0, both gears; at
+    7 s the speed, the scaled second state, dvx/dt at the state and on the kinematic
+    prior, and the gain per 10 N·m, all m/s and m/s² (module doc, ``--torque``)."""
+    import torch
+
+    from parknss.config import SHIPPED_CHAIN
+    from parknss.nss.checkpoint import load_model
+
+    m = load_model(Path(chain or SHIPPED_CHAIN) / "nss").model.double()
+    rows = []
+    for gear in (1.0, -1.0):
+        for torque in TRAP_TORQUES:
+            u = torch.zeros(1, 701, 4, dtype=torch.float64)
+            u[..., 0] = gear
+            u[..., 1] = torque
+            u[0, :100, 1] = 28.0
+            with torch.no_grad():
+                r = m.rollout(torch.zeros(1, 2, dtype=torch.float64), u, engine="eager")
+                x = r.state_s[0, -1:].clone()
+                us = m.scale_inputs(u[0, -1:])
+                hi = us.clone()
+                hi[:, 1] += 10.0 / m.in_sc[1]
+                prior = x.clone()
+                prior[:, 1] = 0.0 if m.cfg.residual_yaw else m.yaw_scaled(
+                    m.yaw_ref(x[:, 0], us[:, 3]))
+
+                def acc(xs, uu):
+                    return float(m.derivative(xs, uu)[0, 0] * m.st_sc[0])
+
+                rows.append({"gear": int(gear), "torque_nm": torque,
+                             "vx": float(r.vx[0, -1]), "state2_s": float(x[0, 1]),
+                             "accel": acc(x, us), "accel_on_prior": acc(prior, us),
+                             "gain_per_10nm": acc(x, hi) - acc(x, us)})  # fmt: skip
+    return rows
+
+
 def replay(cell: int, seed: int = 5, chain_path: str | None = None) -> dict:
     scene = grid_scene(cell)
     cfg = ClosedLoopConfig(plant_seed=seed)
@@ -192,7 +270,28 @@ def main() -> None:
                     help="step tests of the chain or of its NSS under the truth's actuators")
     ap.add_argument("--no-latch", action="store_true", help="--plant nss without the latch")
     ap.add_argument("--steps-only", action="store_true", help="skip the command replay")
+    ap.add_argument("--torque", action="store_true", help="the torque trap only")
     args = ap.parse_args()
+    if args.torque:
+        rows = torque_trap(chain=args.chain, plant=args.plant, latch=not args.no_latch)
+        if args.json:
+            print(json.dumps(rows, indent=2))
+            return
+        print("torque trap (true vx at 7 s, m/s) at " + " / ".join(f"{t:.0f}" for t in
+              TRAP_TORQUES) + " N·m: gear steer | chain | truth | chain rises with torque")
+        for r in rows:
+            c = " / ".join(f"{v7:+.3f}" for _, v7 in r["chain"])
+            t = " / ".join(f"{v7:+.2f}" for _, v7 in r["truth"])
+            print(f"{r['gear']:>3} {r['steer_deg']:>5.0f} | {c} | {t} | "
+                  f"{'yes' if r['monotone'] else 'NO'}")
+        print("passes" if all(r["monotone"] for r in rows) else "FAILS: the trap is there")
+        print("the chain's NSS alone (steering 0) at 7 s: gear torque | vx | second state "
+              "(scaled) | dvx/dt at the state | on the kinematic prior | gain per 10 N·m")
+        for r in regulator(args.chain):
+            print(f"{r['gear']:>3} {r['torque_nm']:>5.0f} | {r['vx']:+.3f} | "
+                  f"{r['state2_s']:+.4f} | {r['accel']:+.3f} | {r['accel_on_prior']:+.3f} | "
+                  f"{r['gain_per_10nm']:+.3f}")
+        return
     if args.stops:
         for c in args.stops.split(","):
             d = stop_errors(int(c))

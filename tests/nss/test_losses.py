@@ -17,6 +17,8 @@ from parknss.nss.losses import (
     BlindZoneObservation,
     Targets,
     blind_zone_observation,
+    decoupling_loss,
+    envelope_points,
     nss_loss,
     observed_speed,
     output_loss,
@@ -361,3 +363,107 @@ def test_torque_gain_prior_is_off_by_default_and_trains_the_gain_up():
         loss.backward()
         opt.step()
     assert float(torque_gain_loss(m, r, b.u, b.targets, lc)) < 0.4 * first
+
+
+def test_torque_prior_envelope_points_span_the_normalizer_range_and_are_seeded():
+    """The envelope draw: half the points per gear, |vx| from the blind-zone edge to the
+    normalizer's range end in the gear's direction, torque over the range's non-negative
+    part, steering over its range, brake released, residual yaw 0; the same points for
+    the same seed, others for another; the logged-only identity keeps its old keys."""
+    m, _cfg, _b = _gain_batch()
+    lc = LossConfig(lambda_torque=1.0, torque_prior_states="envelope", torque_prior_samples=400)
+    x_s, u_s, gear = envelope_points(m, lc, seed=3)
+    assert x_s.shape == (400, 2) and u_s.shape == (400, 4) and gear.shape == (400,)
+    assert int((gear > 0).sum()) == 200 and int((gear < 0).sum()) == 200
+    vx = m.vx_phys(x_s[:, 0])
+    edge = 0.5 / 3.6
+    hi = float(m.st_off[0] + m.st_sc[0].abs())
+    lo = float(m.st_off[0] - m.st_sc[0].abs())
+    fwd, rev = gear > 0, gear < 0
+    assert float(vx[fwd].min()) >= edge - 1e-6 and float(vx[fwd].max()) <= hi + 1e-6
+    assert float(vx[rev].max()) <= -edge + 1e-6 and float(vx[rev].min()) >= lo - 1e-6
+    assert float(vx[fwd].max()) > 0.9 * hi and float(vx[rev].min()) < 0.9 * lo
+    u = u_s * m.in_sc + m.in_off
+    assert torch.equal(u[:, 0], gear)
+    assert float(u[:, 1].min()) >= -1e-5
+    assert float(u[:, 1].max()) > 0.9 * float(m.in_off[1] + m.in_sc[1].abs())
+    assert float(u[:, 2].abs().max()) < 1e-4  # the brake released (scaled 0 bar)
+    assert float(u[:, 3].min()) < 0.0 < float(u[:, 3].max())
+    assert float(x_s[:, 1].abs().max()) == 0.0  # ω_res = 0 on the kinematic prior
+    again = envelope_points(m, lc, seed=3)
+    other = envelope_points(m, lc, seed=4)
+    assert torch.equal(again[1], u_s) and not torch.equal(other[1], u_s)
+    doc = fit_identity(NSSConfig(loss=lc))["loss"]
+    assert doc["torque_prior_states"] == "envelope" and doc["torque_prior_samples"] == 400
+    logged = fit_identity(NSSConfig(loss=LossConfig(lambda_torque=1.0)))["loss"]
+    assert "torque_prior_states" not in logged and "torque_prior_samples" not in logged
+
+
+def test_torque_prior_envelope_reaches_a_trap_the_logged_samples_miss():
+    """A state net whose torque gain inverts only above the logged torques (a speed
+    attractor at high torque, the trap of docs/closed_loop.md): the logged prior reads 0,
+    the envelope prior sees it and equals its hand computation; 'both' is their mean."""
+    m, _cfg, b = _gain_batch()
+    tau_logged = float(b.u[..., 1].max())
+    tau_hi = float(m.in_off[1] + m.in_sc[1].abs())
+    knee = tau_logged + 10.5  # beyond every logged torque plus the 10 N·m step
+    assert tau_hi > knee + 5.0
+    knee_s = float(m.scale_inputs(torch.tensor([0.0, knee, 0.0, 0.0]))[1])
+
+    def f(x_s, u_s):  # gain +1 below the knee, -1 above it (scaled units), per gear
+        tq = u_s[..., 1]
+        a = u_s[..., 0] * torch.where(tq < knee_s, tq, 2 * knee_s - tq)
+        return torch.stack([a, torch.zeros_like(a)], -1)
+
+    m.derivative = f
+    with torch.no_grad():
+        r = m.rollout(b.x0, b.u, engine="eager")
+    base = {"lambda_torque": 1.0, "torque_prior_samples": 600}
+    got = {
+        k: float(torque_gain_loss(m, r, b.u, b.targets,
+                                  LossConfig(**base, torque_prior_states=k), seed=1))
+        for k in ("logged", "envelope", "both")
+    }
+    assert got["logged"] == 0.0 and got["envelope"] > 0.0
+    assert got["both"] == pytest.approx(0.5 * got["envelope"], rel=1e-12)
+    x_s, u_s, gear = envelope_points(m, LossConfig(**base, torque_prior_states="envelope"), 1)
+    step_s = 10.0 / float(m.in_sc[1])
+    u_hi = u_s.clone()
+    u_hi[:, 1] += step_s
+    dv = (f(x_s, u_hi)[:, 0] - f(x_s, u_s)[:, 0]) * m.st_sc[0]
+    want = float(torch.relu(-gear * dv).mean()) / abs(float(m.out_sc[0]))
+    assert got["envelope"] == pytest.approx(want, rel=1e-9)
+
+
+def test_decoupling_prior_penalises_the_yaw_state_as_a_hidden_speed_regulator():
+    """A state net whose acceleration reads the second state (a = k·s2, the hidden speed
+    regulator of docs/closed_loop.md) is penalised by max(0, |k·Δs2|·vx_scale − tol)
+    averaged over the envelope, by hand; one that does not read it (or within the
+    tolerance) costs 0; off by default, and an 'on' fit names its settings."""
+    m, cfg, b = _gain_batch()
+    lc = LossConfig(lambda_decouple=1.0, decouple_tolerance_ms2=0.05, torque_prior_samples=500)
+    x_s, _u_s, _gear = envelope_points(m, lc, seed=2)
+    shift = 2.0 * torch.rand(len(x_s), generator=torch.Generator().manual_seed(3),
+                             dtype=torch.float64) - 1.0
+    vsc = abs(float(m.st_sc[0]))
+    for k in (0.0, 0.04 / vsc, 1.0):
+        def f(x, u, k=k):
+            return torch.stack([k * x[..., 1] + u[..., 1], torch.zeros_like(u[..., 1])], -1)
+
+        m.derivative = f
+        got = float(decoupling_loss(m, lc, seed=2))
+        want = float(torch.relu((k * shift).abs() * vsc - 0.05).mean()) / abs(float(m.out_sc[0]))
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-15)
+        assert (got == 0.0) == (k * vsc <= 0.05)
+    assert got > 0.0
+    assert "lambda_decouple" not in fit_identity(cfg)["loss"]
+    doc = fit_identity(NSSConfig(loss=lc))["loss"]
+    assert doc["lambda_decouple"] == 1.0 and doc["decouple_tolerance_ms2"] == 0.05
+    assert doc["torque_prior_samples"] == 500
+    from parknss.nss.train import epoch_loss
+
+    del m.derivative
+    on = cfg.model_copy(update={"loss": lc})
+    t_on = epoch_loss(m, b, on)
+    assert t_on.decouple is not None and "decouple" in t_on.as_floats()
+    assert epoch_loss(m, b, cfg).decouple is None

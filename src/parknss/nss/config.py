@@ -47,7 +47,8 @@ class LossConfig(StrictModel):
     # added after run folders and fits in progress existed: their digests stay as before
     omit_at_default = frozenset(
         {"blind_zone", "blind_zone_width_kmh", "lambda_torque", "torque_gain_min",
-         "torque_step_nm"}
+         "torque_step_nm", "torque_prior_states", "torque_prior_samples", "lambda_decouple",
+         "decouple_tolerance_ms2"}
     )
     kind: Literal["mae", "mse", "logcosh"] = "mae"
     lambda_vx: float = Field(0.1, ge=0.0, description="weight of the gear-conditioned vx loss")
@@ -76,6 +77,26 @@ class LossConfig(StrictModel):
     )
     torque_step_nm: float = Field(
         10.0, gt=0.0, description="torque-gain prior: the finite-difference torque step, N·m"
+    )
+    torque_prior_states: Literal["logged", "envelope", "both"] = Field(
+        "logged", description="torque-gain prior: where it is evaluated: logged (the "
+        "rollout's moving samples in gear), envelope (seeded states and inputs drawn over "
+        "the normalizer's range, brake released: the steady torque above what a speed needs "
+        "that a speed-controlling driver never logs) or both (the mean of the two)"
+    )
+    torque_prior_samples: int = Field(
+        2048, ge=2, le=1_000_000, description="torque-gain prior, envelope: the number of "
+        "drawn (state, input) points, half in each drive gear, fixed for a fit (train.seed)"
+    )
+    lambda_decouple: float = Field(
+        0.0, ge=0.0, description="weight of the yaw-state decoupling prior (0: off, the "
+        "paper's): at the envelope's points, the longitudinal acceleration must not move "
+        "with the second state (yaw residual or yaw rate) by more than decouple_tolerance_ms2 "
+        "(nss/losses.py)"
+    )
+    decouple_tolerance_ms2: float = Field(
+        0.05, ge=0.0, description="decoupling prior: the change of dvx/dt, m/s², that the "
+        "second state may cause over the yaw range"
     )
 
 
@@ -215,9 +236,21 @@ def fit_identity(cfg: NSSConfig) -> dict:
     if cfg.loss.lambda_torque > 0.0:  # a fit with the torque-gain prior names its settings
         doc["loss"]["torque_gain_min"] = cfg.loss.torque_gain_min
         doc["loss"]["torque_step_nm"] = cfg.loss.torque_step_nm
+        if cfg.loss.torque_prior_states != "logged":  # the envelope names its draw size
+            doc["loss"]["torque_prior_samples"] = cfg.loss.torque_prior_samples
+        else:  # the fits made before the envelope keep their keys
+            doc["loss"].pop("torque_prior_states", None)
+            doc["loss"].pop("torque_prior_samples", None)
     else:  # off: the settings are read by nobody
-        doc["loss"].pop("torque_gain_min", None)
-        doc["loss"].pop("torque_step_nm", None)
+        for k in ("torque_gain_min", "torque_step_nm", "torque_prior_states"):
+            doc["loss"].pop(k, None)
+    if cfg.loss.lambda_decouple > 0.0:  # the decoupling prior names its settings
+        doc["loss"]["decouple_tolerance_ms2"] = cfg.loss.decouple_tolerance_ms2
+        doc["loss"]["torque_prior_samples"] = cfg.loss.torque_prior_samples
+    else:
+        doc["loss"].pop("decouple_tolerance_ms2", None)
+        if cfg.loss.lambda_torque == 0.0 or cfg.loss.torque_prior_states == "logged":
+            doc["loss"].pop("torque_prior_samples", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
         doc.pop("fast", None)

@@ -28,6 +28,20 @@
   (m/s²)/(N·m); 0: monotone only), averaged over those samples. A campaign driven by a
   speed-controlling driver anti-correlates torque and speed, and an NSS fitted to it can
   learn that more torque slows the car (docs/closed_loop.md, "the stop offset").
+  ``torque_prior_states`` says where the prior is evaluated: ``logged`` (the above),
+  ``envelope`` (a seeded draw of ``torque_prior_samples`` states and inputs over the
+  normalizer's range with the brake released, :func:`envelope_points`: the steady torque
+  far above what a speed needs, which such a driver never logs and where the trap was
+  found) or ``both`` (the mean of the two).
+* L_c (``loss.lambda_decouple`` > 0; not the paper's, default off): the yaw-state
+  decoupling prior. The second state (ω_res, or ω_z for direct yaw) is the model's only
+  other memory, and a fit can use it as a hidden speed regulator: a residual of 0.01
+  scaled units (0.1 °/s) that cancels 1 m/s² of drive acceleration holds the speed at the
+  campaign's cruise whatever the torque (the torque trap, docs/closed_loop.md). At the
+  envelope's points (:func:`envelope_points`) the second state is moved over the yaw
+  range and max(0, |Δ(dvx/dt)| − ``decouple_tolerance_ms2``) / (ax scale) is averaged:
+  at parking speeds the car's longitudinal acceleration does not depend on its yaw
+  state beyond cornering drag (a few hundredths of m/s²).
 
 The data-loss shape is MAE (the paper's), MSE or log-cosh; the physics terms are defined
 with max and |.| by eqs. 6-7 and keep that form. "valid" masks padding (windows shorter
@@ -43,7 +57,7 @@ import torch
 from torch import Tensor
 
 from parknss.nss.config import LossConfig
-from parknss.nss.model import I_TORQUE, NSSModel, Rollout
+from parknss.nss.model import I_STEER, I_TORQUE, NSSModel, Rollout
 from parknss.signals import kmh_to_ms
 
 LN2 = math.log(2.0)
@@ -94,6 +108,7 @@ class LossTerms:
     vx_dir: Tensor
     yaw_prior: Tensor
     torque_gain: Tensor | None = None  # the torque-gain prior, when on
+    decouple: Tensor | None = None  # the yaw-state decoupling prior, when on
 
     def as_floats(self) -> dict[str, float]:
         """The parts as floats (a part that is off, None, is left out)."""
@@ -199,21 +214,107 @@ def nss_loss(
     return LossTerms(total, ls, ly, lv, lw)
 
 
-def torque_gain_loss(
-    model: NSSModel, r: Rollout, u: Tensor, t: Targets, cfg: LossConfig
+def envelope_points(
+    model: NSSModel, cfg: LossConfig, seed: int
+) -> tuple[Tensor, Tensor, Tensor]:
+    """The envelope draw of the torque-gain prior: ``cfg.torque_prior_samples`` (state,
+    input) points, half in drive and half in reverse, seeded by ``seed`` (the same points
+    at every step of a fit). Physical ranges are the normalizer's: the scaled interval
+    [-1, 1] of each channel (``clipped``: the training data's 0.5-99.5 % percentiles,
+    ``minmax``: min-max, ``zscore``: mean ± one deviation). Per point: |vx| uniform from
+    the blind-zone edge to the range's end in the gear's direction, drive torque uniform
+    over the range's non-negative part, steering uniform over its range, brake released,
+    and the yaw state on the kinematic prior (ω_res = 0; the direct-yaw state ω_ref).
+    Returns (x_s (N, 2), u_s (N, 4), gear (N,)) in the model's dtype; N is 0 where the
+    range holds no speed beyond the edge in either direction."""
+    gen = torch.Generator().manual_seed(int(seed))
+    dt = model.dtype
+    half = cfg.torque_prior_samples // 2
+    lo_v = float(model.st_off[0] - model.st_sc[0].abs())
+    hi_v = float(model.st_off[0] + model.st_sc[0].abs())
+    edge = kmh_to_ms(cfg.blind_zone_kmh)
+    t_lo = max(0.0, float(model.in_off[I_TORQUE] - model.in_sc[I_TORQUE].abs()))
+    t_hi = max(t_lo, float(model.in_off[I_TORQUE] + model.in_sc[I_TORQUE].abs()))
+    d_lo = float(model.in_off[I_STEER] - model.in_sc[I_STEER].abs())
+    d_hi = float(model.in_off[I_STEER] + model.in_sc[I_STEER].abs())
+
+    def uniform(a: float, b: float) -> Tensor:
+        return a + (b - a) * torch.rand(half, generator=gen, dtype=torch.float64)
+
+    xs, us = [], []
+    for gear, (a, b) in ((1.0, (edge, hi_v)), (-1.0, (-edge, lo_v))):
+        draws = (uniform(0.0, 1.0), uniform(t_lo, t_hi), uniform(d_lo, d_hi))  # seed order
+        if gear * (b - a) <= 0.0:  # no speed beyond the edge this way
+            continue
+        vx = a + (b - a) * draws[0]
+        u = torch.stack(
+            [torch.full_like(vx, gear), draws[1], torch.zeros_like(vx), draws[2]], dim=-1
+        )
+        xs.append(vx)
+        us.append(u)
+    if not xs:
+        empty = torch.zeros(0, dtype=dt)
+        return torch.zeros(0, 2, dtype=dt), torch.zeros(0, 4, dtype=dt), empty
+    u_s = model.scale_inputs(torch.cat(us).to(dt))
+    vx_s = model.scale_states(torch.stack([torch.cat(xs), torch.zeros_like(torch.cat(xs))],
+                                          dim=-1).to(dt))[:, 0]
+    if model.cfg.residual_yaw:
+        yaw_s = torch.zeros_like(vx_s)
+    else:
+        yaw_s = model.yaw_scaled(model.yaw_ref(vx_s, u_s[:, I_STEER]))
+    return torch.stack([vx_s, yaw_s], dim=-1), u_s, torch.cat(us)[:, 0].to(dt)
+
+
+def _gain_penalty(
+    model: NSSModel, x_s: Tensor, u_s: Tensor, gear: Tensor, cfg: LossConfig
 ) -> Tensor:
-    """The torque-gain prior L_τ (module doc) of a rollout ``r`` of ``model`` on the
-    physical inputs ``u`` (B, T, 4); a 0-d tensor in scaled ax units (0 without a moving
-    sample in gear)."""
-    x_s = r.state_s.detach()
-    u_s = model.scale_inputs(u.to(x_s.dtype))
+    """max(0, g_min·Δτ − gear·Δa) per point, m/s² (module doc), at scaled (x_s, u_s)."""
     step_s = cfg.torque_step_nm / model.in_sc[I_TORQUE]
     u_hi = u_s.clone()
     u_hi[..., I_TORQUE] = u_hi[..., I_TORQUE] + step_s
     a0 = model.derivative(x_s, u_s)[..., 0]
     a1 = model.derivative(x_s, u_hi)[..., 0]
     gain = (a1 - a0) * model.st_sc[0]  # Δ(dvx/dt), m/s² for the torque step
-    gear = torch.sign(u[..., 0]).to(gain.dtype)
-    pen = torch.relu(cfg.torque_gain_min * cfg.torque_step_nm - gear * gain)
-    mask = t.moving * (gear != 0).to(gain.dtype)
-    return masked_mean(pen, mask) / model.out_sc[0].abs()
+    return torch.relu(cfg.torque_gain_min * cfg.torque_step_nm - gear * gain)
+
+
+def torque_gain_loss(
+    model: NSSModel, r: Rollout, u: Tensor, t: Targets, cfg: LossConfig, seed: int = 0
+) -> Tensor:
+    """The torque-gain prior L_τ (module doc) of a rollout ``r`` of ``model`` on the
+    physical inputs ``u`` (B, T, 4), at the points ``cfg.torque_prior_states`` names (the
+    envelope's drawn under ``seed``, :func:`envelope_points`); a 0-d tensor in scaled ax
+    units (0 where there is no point: no moving sample in gear, an empty envelope)."""
+    parts = []
+    if cfg.torque_prior_states in ("logged", "both"):
+        x_s = r.state_s.detach()
+        gear = torch.sign(u[..., 0]).to(x_s.dtype)
+        pen = _gain_penalty(model, x_s, model.scale_inputs(u.to(x_s.dtype)), gear, cfg)
+        parts.append(masked_mean(pen, t.moving * (gear != 0).to(pen.dtype)))
+    if cfg.torque_prior_states in ("envelope", "both"):
+        x_s, u_s, gear = envelope_points(model, cfg, seed)
+        if len(gear):
+            parts.append(_gain_penalty(model, x_s, u_s, gear, cfg).mean())
+        else:
+            parts.append(torch.zeros((), dtype=model.dtype))
+    return sum(parts[1:], parts[0]) / len(parts) / model.out_sc[0].abs()
+
+
+def decoupling_loss(model: NSSModel, cfg: LossConfig, seed: int = 0) -> Tensor:
+    """The yaw-state decoupling prior L_c (module doc) at the envelope's points
+    (:func:`envelope_points`, drawn under ``seed``): the second state is moved from the
+    kinematic prior to a value drawn uniformly over the scaled yaw range [-1, 1] around it
+    (seeded by ``seed`` + 1), and the change of dvx/dt beyond ``decouple_tolerance_ms2`` is
+    penalised; a 0-d tensor in scaled ax units (0 for an empty envelope)."""
+    x_s, u_s, _gear = envelope_points(model, cfg, seed)
+    if not len(x_s):
+        return torch.zeros((), dtype=model.dtype)
+    gen = torch.Generator().manual_seed(int(seed) + 1)
+    shift = 2.0 * torch.rand(len(x_s), generator=gen, dtype=torch.float64) - 1.0
+    x_r = x_s.clone()
+    x_r[:, 1] = x_r[:, 1] + shift.to(x_s.dtype)
+    a_ref = model.derivative(x_s, u_s)[:, 0]
+    a_r = model.derivative(x_r, u_s)[:, 0]
+    change = (a_r - a_ref).abs() * model.st_sc[0].abs()  # m/s²
+    pen = torch.relu(change - cfg.decouple_tolerance_ms2)
+    return pen.mean() / model.out_sc[0].abs()

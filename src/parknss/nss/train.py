@@ -40,6 +40,7 @@ from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
 from parknss.nss.losses import (
     LossTerms,
+    decoupling_loss,
     nss_loss,
     output_loss,
     state_loss,
@@ -127,9 +128,13 @@ def epoch_loss(
     r = model.rollout(batch.x0, batch.u, engine=engine)
     terms = nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0])
     if cfg.loss.lambda_torque > 0.0:  # the torque-gain prior (opt-in; nss/losses.py)
-        lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss)
+        lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss, cfg.train.seed)
         terms.total = terms.total + cfg.loss.lambda_torque * lt
         terms.torque_gain = lt
+    if cfg.loss.lambda_decouple > 0.0:  # the yaw-state decoupling prior (opt-in)
+        lc = decoupling_loss(model, cfg.loss, cfg.train.seed)
+        terms.total = terms.total + cfg.loss.lambda_decouple * lc
+        terms.decouple = lc
     return terms
 
 
