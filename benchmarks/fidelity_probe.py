@@ -164,10 +164,10 @@ def regulator(chain: str | None = None) -> list[dict]:
     prior, and the gain per 10 N·m, all m/s and m/s² (module doc, ``--torque``)."""
     import torch
 
-    from parknss.config import SHIPPED_CHAIN
+    from parknss.config import SHIPPED_PLANT
     from parknss.nss.checkpoint import load_model
 
-    m = load_model(Path(chain or SHIPPED_CHAIN) / "nss").model.double()
+    m = load_model(Path(chain or SHIPPED_PLANT) / "nss").model.double()
     rows = []
     for gear in (1.0, -1.0):
         for torque in TRAP_TORQUES:

@@ -79,6 +79,7 @@ def test_config_resolves_from_the_package():
     assert pkg / "models" == pc.MODELS_DIR
     assert pkg / "models" / "nss" == pc.SHIPPED_NSS
     assert pkg / "models" / "chain" == pc.SHIPPED_CHAIN
+    assert pkg / "models" / "plant" == pc.SHIPPED_PLANT
     assert pkg / "campaigns" / "default" == pc.BUNDLED_CAMPAIGN
     assert Path(str(importlib.resources.files("parknss"))).resolve() == pkg
 

@@ -75,11 +75,12 @@ def test_wheel_is_not_the_checkout(wheel_venv, tmp_path):
         "import json, parknss.config as c; print(json.dumps({'file': c.__file__, "
         "'configs': c.CONFIG_DIR.is_dir(), 'nss': (c.SHIPPED_NSS / 'model.json').is_file(), "
         "'chain': (c.SHIPPED_CHAIN / 'chain.json').is_file(), "
+        "'plant': (c.SHIPPED_PLANT / 'chain.json').is_file(), "
         "'campaign': (c.BUNDLED_CAMPAIGN / 'campaign.json').is_file()}))"
     )
     doc = json.loads(_run([wheel_venv / "bin" / "python", "-c", code], tmp_path).stdout)
     assert "site-packages" in doc["file"] and str(REPO) not in doc["file"]
-    assert doc["configs"] and doc["nss"] and doc["chain"] and doc["campaign"]
+    assert doc["configs"] and doc["nss"] and doc["chain"] and doc["plant"] and doc["campaign"]
 
 
 def test_wheel_demo_prints_what_the_editable_install_prints(wheel_venv, tmp_path):

@@ -38,6 +38,11 @@ CAMPAIGNS_DIR = PACKAGE_DIR / "campaigns"
 BUNDLED_CAMPAIGN = CAMPAIGNS_DIR / "default"
 SHIPPED_NSS = MODELS_DIR / "nss"
 SHIPPED_CHAIN = MODELS_DIR / "chain"
+"""The paper-recipe chain on SHIPPED_NSS: the paper's protocol (Table IV, Fig. 7, the demo's
+open-loop rollout)."""
+SHIPPED_PLANT = MODELS_DIR / "plant"
+"""The deployed plant: the chain of the closed-loop recipe (configs/plant/), the default of
+everything closed loop (simulate, grid, fidelity, web, gym) and of the exports."""
 REPO_ROOT = PACKAGE_DIR.parents[1]
 """The checkout root when running from a source tree (``src/parknss`` -> ``.``); for an
 installed wheel this is the ``site-packages`` parent and holds no repository."""

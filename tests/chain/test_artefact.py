@@ -15,7 +15,7 @@ from safetensors.torch import load_file, save_file
 
 from parknss.chain import load_chain
 from parknss.chain.artefact import MAX_LAGS, MEMBERS, META, WEIGHTS
-from parknss.config import SHIPPED_CHAIN
+from parknss.config import CONFIG_DIR, SHIPPED_CHAIN, SHIPPED_PLANT
 from parknss.durable import MANIFEST, read_manifest, write_manifest
 from parknss.errors import CheckpointError
 from parknss.nss.checkpoint import MAX_UNITS
@@ -44,10 +44,27 @@ def _edit(path, fn, reseal=False):
         write_manifest(path.parent)
 
 
-def test_the_shipped_chain_lists_every_file_and_loads():
-    assert set(read_manifest(SHIPPED_CHAIN)) == set(MEMBERS)
-    assert set(read_manifest(SHIPPED_CHAIN / "nss")) == {"model.json", "model.safetensors"}
-    load_chain(SHIPPED_CHAIN)
+@pytest.mark.parametrize("folder", [SHIPPED_CHAIN, SHIPPED_PLANT], ids=["chain", "plant"])
+def test_the_shipped_chains_list_every_file_and_load(folder):
+    assert set(read_manifest(folder)) == set(MEMBERS)
+    assert set(read_manifest(folder / "nss")) == {"model.json", "model.safetensors"}
+    load_chain(folder)
+
+
+def test_the_deployed_plant_is_what_configs_plant_builds():
+    """models/plant's NSS carries exactly configs/plant/nss.yaml's config, and its chain the
+    selection and co-tuning of configs/plant/ (the recipe the README rebuilds it with)."""
+    from parknss.actuators.config import load_actuator_config
+    from parknss.nss.checkpoint import load_model
+    from parknss.nss.config import load_nss_config
+
+    recipe = CONFIG_DIR / "plant"
+    assert load_model(SHIPPED_PLANT / "nss").config == load_nss_config(recipe / "nss.yaml")
+    build = json.loads((SHIPPED_PLANT / META).read_text())["build"]
+    assert build["selection"] == json.loads((recipe / "selection.json").read_text())["winners"]
+    cotune = load_actuator_config(recipe / "actuators.yaml").cotune
+    assert (build["cotune"]["target"], build["cotune"]["iters"]) == (cotune.target, cotune.iters)
+    assert build["deployed"]["brake"] == f"{cotune.target}+cotuned"
 
 
 def test_an_edited_nss_normaliser_is_refused(chain):

@@ -27,6 +27,9 @@ SETS = [
     {"drive": "drive/lag2/uniform", "brake": "brake/lstm/phys",
      "steering": "steering/narx/uniform"},
     {"drive": "drive/static/phys", "brake": "brake/narx1s/cmd", "steering": "steering/gru/cmd"},
+    {"drive": "drive/hammerstein/uniform", "brake": "brake/monolag/phys",  # models/plant's
+     "steering": "steering/lag1/uniform"},
+    {"drive": "drive/lag1/uniform", "brake": "brake/monolag/cmd", "steering": "steering/lag2/cmd"},
 ]
 
 
@@ -132,17 +135,18 @@ def test_c_tanh_is_within_1_4_ulp_and_odd(chains):
     assert np.isnan(y[np.isnan(x)]).all()
 
 
-def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_refuse_it(
+def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_step_it(
         actuator_campaign, actuator_nss, tmp_path):
-    """The monotone brake (opt-in candidate) travels in the artefact (its structure
-    config with it) and steps identically after loading; the generated C and the ONNX
-    step have no template for it and refuse the chain in one line."""
+    """The monotone brake (models/plant's) travels in the artefact (its structure config
+    with it) and steps identically after loading; the generated C steps it as the NumPy
+    twin does (1e-9) and the ONNX step as well (float32, 1e-5), the hold gate's state
+    included."""
+    import onnxruntime as ort
+
     from parknss.chain import load_chain
-    from parknss.chain.ccode import chain_c_source
     from parknss.chain.deployed import save_chain
     from parknss.chain.model import NSSProvenance
-    from parknss.errors import CheckpointError
-    from parknss.export.onnx_step import ChainStep
+    from parknss.export.onnx_step import chain_state, export_onnx
 
     camp = list(actuator_campaign)
     nss, ncfg = actuator_nss
@@ -153,8 +157,10 @@ def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_refuse_it(
     models = {ch: fit_candidate(CandidateSpec.parse(n), camp[:3], cfg, env)[0]
               for ch, n in names.items()}
     chain = make_chain(nss, models, env, NSSProvenance(ncfg, {}))
-    dep = load_chain(save_chain(tmp_path / "chain", chain, {}))
+    folder = save_chain(tmp_path / "chain", chain, {})
+    dep = load_chain(folder)
     assert dep.chain.model("brake").spec.name == "brake/monolag/phys"
+    assert dep.rt.steppers["brake"].hold  # the speed feature arms the hold
     tr = camp[0]
     cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd")).copy()
     x0 = [tr["vx"][0], tr["yaw_rate"][0]]
@@ -162,7 +168,18 @@ def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_refuse_it(
     a = _replay(DeployedChain(chain).rt, cm, x0, y0)
     b = _replay(dep.rt, cm, x0, y0)
     assert np.max(np.abs(a - b)) < 1e-12
-    for make in (chain_c_source, ChainStep):
-        with pytest.raises(CheckpointError, match=r"no (C|ONNX) template") as ei:
-            make(dep.rt)
-        assert "\n" not in str(ei.value)
+    assert np.max(np.abs(_replay(NativeChain(dep.rt), cm, x0, y0) - a)) <= 1e-9
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = so.inter_op_num_threads = 1
+    sess = ort.InferenceSession(str(export_onnx(tmp_path / "c.onnx", chain_dir=folder).path),
+                                so, providers=["CPUExecutionProvider"])
+    rt = dep.rt
+    rt.start(x0, y0, cm[0])
+    worst = 0.0
+    for k in range(len(cm)):
+        nxt, out = sess.run(None, {"state": chain_state(rt).astype(np.float32),
+                                   "command": cm[k].astype(np.float32)})
+        act, st = rt.step(*cm[k])
+        for got, ref in ((out, np.array([*act, *st, rt.gear])), (nxt, chain_state(rt))):
+            worst = max(worst, float(np.max(np.abs(got - ref) / np.maximum(1.0, np.abs(ref)))))
+    assert worst <= 1e-5

@@ -37,9 +37,9 @@ def test_fmu_matches_the_realtime_chain(shipped_fmu):
 
 
 def shipped_fmu_chain():
-    from parknss.config import SHIPPED_CHAIN
+    from parknss.config import SHIPPED_PLANT
 
-    return SHIPPED_CHAIN
+    return SHIPPED_PLANT  # what `parknss export fmu` packs by default
 
 
 def test_communication_step_of_several_samples(shipped_fmu):

@@ -8,7 +8,7 @@ import onnx
 import pytest
 
 from parknss.chain import load_chain
-from parknss.config import SHIPPED_CHAIN, SHIPPED_NSS
+from parknss.config import SHIPPED_CHAIN, SHIPPED_NSS, SHIPPED_PLANT
 from parknss.export.onnx_step import chain_state, export_onnx, nss_initial_state
 from parknss.nss.campaigns import default_campaign
 from parknss.outputs import OutputExistsError
@@ -27,11 +27,14 @@ def _rel(a, b) -> float:
     return float(np.max(np.abs(np.asarray(a, float) - b) / np.maximum(1.0, np.abs(b))))
 
 
-def test_chain_step_equals_the_numpy_twin(tmp_path):
-    rep = export_onnx(tmp_path / "chain.onnx")
+@pytest.mark.parametrize("folder", [None, SHIPPED_CHAIN], ids=["plant", "paper-chain"])
+def test_chain_step_equals_the_numpy_twin(tmp_path, folder):
+    """The default export (models/plant, monotone brake with its hold) and the paper
+    chain (NARX brake)."""
+    rep = export_onnx(tmp_path / "chain.onnx", chain_dir=folder)
     onnx.checker.check_model(onnx.load(str(rep.path)), full_check=True)
     sess = _session(rep.path)
-    rt = load_chain(SHIPPED_CHAIN).rt
+    rt = load_chain(folder or SHIPPED_PLANT).rt
     tr = min(default_campaign(), key=lambda t: t.n)  # a whole trial, the shortest
     cm, ac = tr.array(COMMAND_CHANNELS), tr.array(ACTUAL_CHANNELS[1:])
     rt.start([tr["vx"][0], tr["yaw_rate"][0]], ac[0], cm[0])

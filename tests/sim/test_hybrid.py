@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from helpers.scenes import arc_scene
+from parknss.config import SHIPPED_CHAIN
 from parknss.errors import ConfigError
 from parknss.plant import Commands
 from parknss.sim.closed_loop import ClosedLoopConfig, execute
@@ -51,8 +52,9 @@ def test_nss_hybrid_feeds_the_truths_actuals_to_the_chains_nss():
 
 
 def test_actuators_hybrid_uses_the_chains_brake_and_the_truths_body():
-    hyb = make_hybrid("actuators", seed=3)
-    chain = make_plant("chain")
+    # the paper chain: its brake reads only its command (models/plant's reads |vx| too)
+    hyb = make_hybrid("actuators", chain_path=SHIPPED_CHAIN, seed=3)
+    chain = make_plant("chain", chain_path=SHIPPED_CHAIN)
     hyb.reset()
     chain.reset()
     moved = 0.0

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from parknss.cli import main
-from parknss.config import CONFIG_DIR, SHIPPED_CHAIN
+from parknss.config import CONFIG_DIR, SHIPPED_CHAIN, SHIPPED_PLANT
 from parknss.errors import ParknssError
 from parknss.sim.closed_loop import SimConfigFiles
 from parknss.sim.plants import make_plant
@@ -22,6 +22,7 @@ TPCAP_CAR = CONFIG_DIR / "tpcap_vehicle.yaml"
 
 def test_the_run_geometry_comes_from_the_file_else_the_chain():
     assert chain_geometry(SHIPPED_CHAIN) == VehicleGeometry()  # the shipped chain's car
+    assert chain_geometry(SHIPPED_PLANT) == VehicleGeometry()  # and the deployed plant's
     assert resolve_vehicle() == VehicleGeometry()
     assert resolve_vehicle(TPCAP_CAR).wheelbase == 2.8
     assert SimConfigFiles(vehicle=TPCAP_CAR).vehicle_geometry().width == 1.942

@@ -127,6 +127,38 @@ def test_simulate_equals_the_cli(client):
     assert max(abs(v) for v in s["vx"]) <= 0.76  # the tracker's 0.75 m/s ceiling
 
 
+def test_fidelity_equals_the_cli(client):
+    """The page's chain-vs-truth view of a cell is ``parknss fidelity``'s for that cell: the
+    same noise seed, the same CellFidelity numbers, the targets checked on the one cell, and
+    both runs' series for the overlay."""
+    from parknss.experiments.fidelity import fidelity_job
+    from parknss.sim.closed_loop import SimConfigFiles
+    from parknss.sim.fidelity import cell_seed, load_fidelity_config
+
+    fcfg = load_fidelity_config()
+    seed = cell_seed(fcfg.seed, str(CELL))
+    cli = fidelity_job(str(CELL), seed, SimConfigFiles().to_json(), fcfg.iso.model_dump())
+    doc = client.post("/api/fidelity", json={"index": CELL}).json()
+    assert doc["seed"] == seed and doc["truth"]["outcome"]["seed"] == seed
+    assert doc["chain"]["outcome"]["plant"] == "chain"
+    assert doc["truth"]["outcome"]["plant"] == "reference"
+    for key, want in cli["fidelity"].items():
+        got = doc["fidelity"][key]
+        if isinstance(want, float):
+            assert got == pytest.approx(want, rel=1e-5, abs=1e-9), key
+        else:
+            assert got == want, key
+    assert len(doc["targets"]) == 7
+    dev = abs(cli["fidelity"]["duration_ratio"] - 1.0)
+    line = next(t for t in doc["targets"] if t["label"] == "median |duration ratio - 1|")
+    assert line["measured"] == pytest.approx(dev) and line["passed"] == (dev <= line["limit"])
+    for run in ("chain", "truth"):
+        s = doc[run]["series"]
+        assert s["t"][-1] == pytest.approx(doc[run]["outcome"]["duration_s"])
+    other = client.post("/api/fidelity", json={"index": CELL, "seed": seed + 1}).json()
+    assert other["seed"] == seed + 1 and other["plan"]["cached"]
+
+
 MALFORMED = [
     ("bad json", '{"index": 1', 400, "not valid JSON"),
     ("unknown plant", {"index": 1, "plant": "bicycle"}, 422, "unknown plant 'bicycle'"),

@@ -24,22 +24,15 @@ CELL = "26"
 TIMEOUT_MS = 240_000  # generous: the machine may be loaded
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    """The app under uvicorn on a free 127.0.0.1 port, in a thread; the chain made missing."""
+def _serve(**config):
+    """The app under uvicorn on a free 127.0.0.1 port, in a thread (a generator: yields
+    its address, then stops it)."""
     import uvicorn
 
-    cfg_file = tmp_path_factory.mktemp("web") / "closed_loop.yaml"
-    cfg_file.write_text(f"chain_path: {cfg_file.parent / 'no_chain_here'}\n")
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    cfg = load_web_config(
-        port=port,
-        closed_loop_config=str(cfg_file),
-        plan_budget_s=300.0,
-        simulate_budget_s=600.0,
-    )
+    cfg = load_web_config(port=port, plan_budget_s=300.0, simulate_budget_s=600.0, **config)
     srv = uvicorn.Server(
         uvicorn.Config(create_app(cfg), host="127.0.0.1", port=port, log_level="warning")
     )
@@ -55,16 +48,42 @@ def server(tmp_path_factory):
     thread.join(10.0)
 
 
-@pytest.fixture
-def page(browser, server):
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """The simulator with the chain made missing."""
+    cfg_file = tmp_path_factory.mktemp("web") / "closed_loop.yaml"
+    cfg_file.write_text(f"chain_path: {cfg_file.parent / 'no_chain_here'}\n")
+    yield from _serve(closed_loop_config=str(cfg_file))
+
+
+@pytest.fixture(scope="module")
+def chain_server():
+    """The simulator with the shipped configs: the deployed plant available."""
+    yield from _serve()
+
+
+def _open(browser, address):
     ctx = browser.new_context(viewport={"width": 1440, "height": 1000})
     pg = ctx.new_page()
     pg.set_default_timeout(TIMEOUT_MS)
     pg.console_errors = []
     pg.on("console", lambda m: m.type == "error" and pg.console_errors.append(m.text))
     pg.on("pageerror", lambda e: pg.console_errors.append(f"page error: {e}"))
-    pg.goto(f"{server}?grid=36&cell={CELL}")
+    pg.goto(f"{address}?grid=36&cell={CELL}")
     pg.wait_for_selector(f"#cell option[value='{CELL}']", state="attached")
+    return ctx, pg
+
+
+@pytest.fixture
+def page(browser, server):
+    ctx, pg = _open(browser, server)
+    yield pg
+    ctx.close()
+
+
+@pytest.fixture
+def chain_page(browser, chain_server):
+    ctx, pg = _open(browser, chain_server)
     yield pg
     ctx.close()
 
@@ -140,6 +159,30 @@ def test_a_kinematic_cell_runs_and_plays_back(page, tmp_path):
     assert page.console_errors == []
 
 
+def test_chain_vs_truth_shows_the_cells_fidelity(chain_page):
+    """The fidelity button drives the plan under the chain and the truth, overlays both
+    runs and shows the cell's fidelity with the seven targets checked."""
+    page = chain_page
+    _settled(page)
+    page.click("#fidelity-btn")
+    page.wait_for_function(
+        "!document.querySelector('#fidelity-section').hidden && "
+        "document.querySelector('#busy').hidden", timeout=600_000
+    )
+    rows = page.inner_text("#outcome tbody")
+    assert "chain" in rows and "reference" in rows
+    table = page.inner_text("#fidelity")
+    assert "ISO vx / ω_z" in table and "goal err [cm]" in table
+    assert page.locator("#fidelity-targets tr").count() == 7
+    assert "PASS" in page.inner_text("#fidelity-targets")
+    assert page.locator("#fidelity-cells tbody tr").count() == 1
+    plants = {p["kind"]: p["colour"] for p in page.evaluate("state.health.plants")}
+    for kind in ("chain", "reference"):
+        assert _pixels_like(page, ".plot[data-channel='vx']", plants[kind]) > 50, kind
+    assert page.is_hidden("#error")
+    assert page.console_errors == []
+
+
 def test_dragging_the_start_replans_from_there(page):
     _settled(page)
     before = page.evaluate("state.start.slice()")
@@ -157,6 +200,15 @@ def test_dragging_the_start_replans_from_there(page):
     first = page.evaluate("state.plan.path[0].poses[0]")
     assert first == pytest.approx(after, abs=1e-3)
     assert page.console_errors == []
+
+
+def test_chain_vs_truth_without_a_chain_shows_the_api_error(page):
+    _settled(page)
+    page.click("#fidelity-btn")
+    page.wait_for_selector("#error:not([hidden])")
+    msg = page.inner_text("#error")
+    assert "chain plant" in msg and "\n" not in msg.strip()
+    assert page.is_hidden("#fidelity-section")
 
 
 def test_an_unavailable_plant_shows_the_api_error(page):

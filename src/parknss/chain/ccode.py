@@ -7,16 +7,17 @@ float64 twin, the reference implementation) as two C99 files, ``pk_chain.h`` and
 the doubles round-trip exactly), and the twin's arithmetic statement for statement: the
 input envelope (NaN hold, ±inf and domain clamps), the gear rule
 (:mod:`parknss.actuators.shift`), the three steppers (static, lag1, Hammerstein, lag2,
-NARX, GRU, LSTM; state-aware features), the output envelope (floors, steering rate limit,
-lock) and the NSS's Euler step and readout. Two things differ from NumPy: the order of the
-sums inside a matrix-vector product (NumPy's BLAS), and ``tanh``, which the C computes
-from IEEE basic operations only (``pk_tanh_v``: Cephes' rational form below 0.625, else
-1 - 2/(e^{2|x|} + 1) with its own e^y; within 1.4 ulp of the exact value (1.34 measured,
-just above 0.625), where glibc's is within 2 ulp and NumPy's SIMD one 1.2, and those two
-differ from each other in a third of the arguments), vectorised and free of libm, so it
-has the same bits on every machine and in every build. The two agree to rounding over
-whole trials (shipped chain, longest bundled trial: 2.1e-14 against 1.4e-14 with libm's
-tanh; tests/chain/test_ccode.py and the FMU test hold 1e-9).
+NARX, GRU, LSTM, the monotone brake with its hold; state-aware features), the output
+envelope (floors, steering rate limit, lock) and the NSS's Euler step and readout. Two
+things differ from NumPy: the order of the sums inside a matrix-vector product (NumPy's
+BLAS), and ``tanh``, which the C computes from IEEE basic operations only (``pk_tanh_v``:
+Cephes' rational form below 0.625, else 1 - 2/(e^{2|x|} + 1) with its own e^y; within 1.4
+ulp of the exact value (1.34 measured, just above 0.625), where glibc's is within 2 ulp
+and NumPy's SIMD one 1.2, and those two differ from each other in a third of the
+arguments), vectorised and free of libm, so it has the same bits on every machine and in
+every build. The two agree to rounding over whole trials (shipped chain, longest bundled
+trial: 2.1e-14 against 1.4e-14 with libm's tanh; tests/chain/test_ccode.py and the FMU
+test hold 1e-9).
 
 The C interface (``pk_chain.h``)::
 
@@ -53,6 +54,7 @@ from parknss.actuators.steppers import (
     Lag1Stepper,
     Lag2Stepper,
     LSTMStepper,
+    MonoLagStepper,
     NARXStepper,
     StaticStepper,
     Stepper,
@@ -200,6 +202,8 @@ def _stepper(ch: str, st: Stepper, feats: tuple[str, ...], w: _Writer) -> tuple[
                 f"    for (int j = 0; j < {n + nf}; ++j) sk += {sw}[j] * z[j];\n"
                 f"    return (o[0] + sk + {_num(st.skip_b)}) * {ys} + {yo};\n")
         return reset, step
+    if isinstance(st, MonoLagStepper):
+        return _monolag(ch, st, w)
     if isinstance(st, GRUStepper):
         H, nf = st.H, st.n_feat
         lstm = isinstance(st, LSTMStepper)
@@ -236,14 +240,64 @@ def _stepper(ch: str, st: Stepper, feats: tuple[str, ...], w: _Writer) -> tuple[
     raise CheckpointError(f"no C template for the {type(st).__name__} stepper")
 
 
+def _monolag_map(ch: str, st: MonoLagStepper, kn: str, wn: str, r: str) -> str:
+    """C statements setting ``m`` to the static map m(r) = b + sum_k w_k sp(beta (r - knot_k))
+    / beta, with sp(x) = max(x, 0) + log1p(e^-|x|) (NumPy's logaddexp(x, 0))."""
+    beta = _num(st.beta)
+    return (f"    double m = 0.0;\n"
+            f"    for (int k = 0; k < {len(st.knots)}; ++k) {{\n"
+            f"        double x = {beta} * ({r} - {kn}[k]);\n"
+            f"        m += (fmax(x, 0.0) + log1p(exp(-fabs(x)))) / {beta} * {wn}[k];\n"
+            f"    }}\n    m = {_num(st.b)} + m;\n")
+
+
+def _monolag(ch: str, st: MonoLagStepper, w: _Writer) -> tuple[str, str]:
+    """(reset, step) of the monotone brake (:class:`MonoLagStepper`): the static map's last
+    n values in a doubled ring buffer, the delay kernel over them, the hold floor and its
+    gate filter (when the spec has the speed feature), the critically damped lag."""
+    n, ys, yo = st.n, _num(st.y_sc), _num(st.y_off)
+    kn, wn = w.vec(f"{ch}_knots", st.knots), w.vec(f"{ch}_mw", st.w)
+    lam = w.vec(f"{ch}_lam", st.lam)
+    r = f"{_num(st.d)} * (c - {_num(st.c_off)}) / {_num(st.c_sc)}"
+    reset = (f"    double r = {_num(st.d)} * (c0 - {_num(st.c_off)}) / {_num(st.c_sc)};\n"
+             + _monolag_map(ch, st, kn, wn, "r")
+             + f"    for (int i = 0; i < {2 * n}; ++i) s->{ch}.buf[i] = m;\n"
+             f"    s->{ch}.i = 0;\n    s->{ch}.gf = 0.0;\n"
+             f"    s->{ch}.pos = (y0 - {yo}) / {ys};\n    s->{ch}.rate = 0.0;\n")
+    hold = ""
+    if st.hold:
+        beta = _num(st.beta)
+        hold = (f"    double fl = {_num(st.b)} + {_num(st.H)} * s->{ch}.gf;\n"
+                "    if (fl > t) t = fl;\n"
+                f"    double gate = (1.0 / (1.0 + exp(-{beta} * (r - {_num(st.r_h)})))) *\n"
+                f"        (1.0 / (1.0 + exp(-({_num(st.v_h)} - fabs(vx)) / {_num(st.v_w)})));\n"
+                f"    double a = gate > s->{ch}.gf ? {_num(st.a_on)} : {_num(st.a_off)};\n"
+                f"    s->{ch}.gf = a * s->{ch}.gf + (1.0 - a) * gate;\n")
+    (a00, a01), (a10, a11) = st.A
+    b0, b1 = st.Bv
+    step = (f"    double r = {r};\n" + _monolag_map(ch, st, kn, wn, "r")
+            + f"    int i = s->{ch}.i;\n"
+            f"    s->{ch}.buf[i] = s->{ch}.buf[i + {n}] = m;\n"
+            f"    i = s->{ch}.i = (i + 1) % {n};\n"
+            f"    double t = 0.0;\n"
+            f"    for (int j = 0; j < {n}; ++j) t += s->{ch}.buf[i + j] * {lam}[j];\n"
+            + hold
+            + f"    double p = s->{ch}.pos, q = s->{ch}.rate;\n"
+            f"    double out = p * {ys} + {yo};\n"
+            f"    s->{ch}.pos = {_num(a00)} * p + {_num(a01)} * q + {_num(b0)} * t;\n"
+            f"    s->{ch}.rate = {_num(a10)} * p + {_num(a11)} * q + {_num(b1)} * t;\n"
+            "    return out;\n")
+    return reset, step
+
+
 def _state_struct(rt: RealtimeChain) -> str:
     """The per-channel state fields of pk_chain."""
     fields = []
     for ch in CHANNELS:
         st = rt.steppers[ch]
         f = ["double y", "double pos", "double rate"]
-        if isinstance(st, NARXStepper):
-            f += [f"double buf[{2 * st.n}]", "int i"]
+        if isinstance(st, NARXStepper | MonoLagStepper):
+            f += [f"double buf[{2 * st.n}]", "int i", "double gf"]
         if isinstance(st, GRUStepper):
             f += [f"double h[{st.H}]", f"double c[{st.H}]"]
         fields.append("    struct { " + "; ".join(f) + f"; }} {ch};")

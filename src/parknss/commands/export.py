@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
     @sub.command("fmu", short_help="FMI 2.0 co-simulation FMU of the chain.")
     def fmu(
         out: Path = typer.Option(..., "--out", help="FMU file to write (.fmu)."),
-        chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/chain)."),
+        chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/plant)."),
         verify: bool = typer.Option(False, "--verify", help="Replay --data through FMPy."),
         data: Path | None = typer.Option(None, "--data", help="Campaign for --verify."),
         overwrite: bool = over_opt, as_json: bool = json_opt,
@@ -41,7 +41,7 @@ def register(app: typer.Typer) -> None:
         doc = export_fmu(out, chain, overwrite).to_json()
         if verify:
             from parknss.chain.deployed import load_chain
-            from parknss.config import SHIPPED_CHAIN
+            from parknss.config import SHIPPED_PLANT
             from parknss.export.verify import fmu_trial_errors
             from parknss.nss.campaigns import load_campaign
 
@@ -51,7 +51,7 @@ def register(app: typer.Typer) -> None:
                 typer.echo(f"[verify] {i}/{n} {e.trial}: largest difference {e.worst:.3g}",
                            err=True)
 
-            errs = fmu_trial_errors(out, load_chain(chain or SHIPPED_CHAIN), trials, show)
+            errs = fmu_trial_errors(out, load_chain(chain or SHIPPED_PLANT), trials, show)
             doc["verify"] = {e.trial: e.max_abs for e in errs}
             doc["verify_worst"] = max(e.worst for e in errs)
         if as_json:
@@ -66,7 +66,7 @@ def register(app: typer.Typer) -> None:
     def onnx(
         out: Path = typer.Option(..., "--out", help="ONNX file to write (.onnx)."),
         model: Path | None = typer.Option(None, "--model", help="NSS model folder."),
-        chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/chain)."),
+        chain: Path | None = typer.Option(None, "--chain", help="Chain folder (models/plant)."),
         overwrite: bool = over_opt, as_json: bool = json_opt,
     ) -> None:
         """One 10 ms step (state, command -> next state, outputs) as an ONNX graph."""

@@ -8,7 +8,7 @@ Five steps, each writing its artefacts to the run folder:
 3. the shipped command-to-vehicle chain (models/chain) rolled out from the logged
    commands: the same errors, and its ISO/TS 18571 rating (raw and 5 Hz filtered, Fig. 7);
 4. one parking cell planned and executed in closed loop under the ideal kinematic plant
-   and the learned chain (Fig. 8, Fig. 9);
+   and the deployed plant (models/plant, the closed-loop recipe's chain; Fig. 8, Fig. 9);
 5. ``summary.json`` with every number printed (:func:`summary_text`).
 
 ``summary.json`` is tidy (:func:`tidy`): floats at 6 significant digits (no

@@ -54,7 +54,7 @@ def cell_inputs(kwargs: Mapping[str, Any]) -> dict[str, str]:
     arguments: the resolved closed-loop, interface (overrides applied), planning and
     scenario configs, the chain artefact (the chain plant and the default car) and the
     reference vehicle's parameters (the reference plant)."""
-    from parknss.config import SHIPPED_CHAIN, override
+    from parknss.config import SHIPPED_PLANT, override
     from parknss.sim.closed_loop import SimConfigFiles
 
     files = SimConfigFiles(kwargs.get("closed_loop_config"), kwargs.get("interface_config"),
@@ -66,7 +66,7 @@ def cell_inputs(kwargs: Mapping[str, Any]) -> dict[str, str]:
     out = {"closed_loop": config_digest(cfg), "interface": config_digest(icfg),
            "planning": config_digest(files.planning_config()),
            "scenarios": config_digest(files.scenarios_config())}
-    chain = Path(cfg.chain_path) if cfg.chain_path else SHIPPED_CHAIN
+    chain = Path(cfg.chain_path) if cfg.chain_path else SHIPPED_PLANT
     if (chain / "chain.json").is_file():
         out["chain"] = artefact_digest(chain)
     if files.vehicle is not None:

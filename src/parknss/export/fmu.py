@@ -36,7 +36,7 @@ from parknss import __version__
 from parknss.chain.ccode import chain_c_source
 from parknss.chain.deployed import DeployedChain, load_chain
 from parknss.chain.native import build_shared
-from parknss.config import SHIPPED_CHAIN
+from parknss.config import SHIPPED_PLANT
 from parknss.errors import ParknssError
 from parknss.export.config import FmuConfig, load_export_config
 from parknss.export.fmi2_source import (
@@ -193,7 +193,7 @@ def export_fmu(out: str | Path, chain_dir: str | Path | None = None,
         raise ParknssError(f"{out}: an FMU file name ends in .fmu")
     out = check_file_target(out, overwrite=overwrite)  # before any work
     plat = _platform()
-    src_dir = Path(chain_dir) if chain_dir is not None else SHIPPED_CHAIN
+    src_dir = Path(chain_dir) if chain_dir is not None else SHIPPED_PLANT
     dep = load_chain(src_dir)
     csrc = chain_c_source(dep.rt, name=f"parknss chain {src_dir.name}")
     guid = "{" + str(uuid.UUID(hashlib.sha256(csrc.source.encode()).hexdigest()[:32])) + "}"

@@ -14,7 +14,8 @@ The chain state is laid out by :class:`StateLayout` (names in the graph's metada
 output envelope, the gear rule's engaged gear and counter, whether the NSS has started,
 the initial [vx, yaw], the NSS state and the previous vx and yaw rate, then each channel's
 stepper state (lag: y; lag2: pos, rate; NARX: the command window, oldest first; GRU: h;
-LSTM: h, c). :func:`chain_state` packs a :class:`~parknss.chain.realtime.RealtimeChain`
+LSTM: h, c; the monotone brake: its static map's window, oldest first, the hold gate, pos,
+rate). :func:`chain_state` packs a :class:`~parknss.chain.realtime.RealtimeChain`
 (after ``start``: the initial state) into it; :func:`nss_initial_state` gives the NSS's.
 
 The step is a torch module written from the real-time twin's float64 numbers
@@ -42,6 +43,7 @@ from parknss.actuators.steppers import (
     Lag1Stepper,
     Lag2Stepper,
     LSTMStepper,
+    MonoLagStepper,
     NARXStepper,
     StaticStepper,
     Stepper,
@@ -63,6 +65,9 @@ def _t(a) -> Tensor:
 
 
 def _stepper_names(ch: str, st: Stepper) -> list[str]:
+    if isinstance(st, MonoLagStepper):
+        return [*(f"{ch}.window{i}" for i in range(st.n)), f"{ch}.gate", f"{ch}.pos",
+                f"{ch}.rate"]
     if isinstance(st, NARXStepper):
         return [f"{ch}.window{i}" for i in range(st.n)]
     if isinstance(st, LSTMStepper):
@@ -106,7 +111,9 @@ def chain_state(rt: RealtimeChain) -> np.ndarray:
          float(rt.x is not None), *rt._x0, *x, rt.vx_now, rt.yaw_prev]
     for ch in CHANNELS:
         st = rt.steppers[ch]
-        if isinstance(st, NARXStepper):
+        if isinstance(st, MonoLagStepper):
+            v += [*st.buf[st.i : st.i + st.n].tolist(), st.gf, st.pos, st.rate]
+        elif isinstance(st, NARXStepper):
             v += st.buf[st.i : st.i + st.n].tolist()
         elif isinstance(st, LSTMStepper):
             v += [*st.h, *st.c]
@@ -201,6 +208,8 @@ class _Channel(nn.Module):
         if isinstance(st, GRUStepper):
             self.Wi, self.bi, self.Wh, self.bh = (_t(st.Wi), _t(st.bi), _t(st.Wh), _t(st.bh))
             self.Wo = _t(st.Wo)
+        if isinstance(st, MonoLagStepper):
+            self.knots, self.mw, self.lam = _t(st.knots), _t(st.w), _t(st.lam)
 
     def feats(self, vx: Tensor, yaw: Tensor, g: Tensor) -> Tensor:
         src = {"speed": torch.abs(vx), "vx": vx, "yaw_rate": yaw, "gear": g}
@@ -219,6 +228,8 @@ class _Channel(nn.Module):
         st = self.st
         cs = (c - st.c_off) / st.c_sc
         fs = self.feats(vx, yaw, g)
+        if isinstance(st, MonoLagStepper):
+            return self._monolag(s, c, vx)
         if isinstance(st, NARXStepper):
             win = torch.cat([s[1:], cs.reshape(1)])
             z = torch.cat([win, fs])
@@ -256,6 +267,27 @@ class _Channel(nn.Module):
                 u = u + self.psi(torch.cat([cs.reshape(1), fs]))[0]
             return s[0] * st.y_sc + st.y_off, (a * s[0] + (1.0 - a) * u).reshape(1)
         return self.target(cs, fs) * st.y_sc + st.y_off, s
+
+    def _monolag(self, s: Tensor, c: Tensor, vx: Tensor) -> tuple[Tensor, Tensor]:
+        """The monotone brake: state [map window (n, oldest first), hold gate, pos, rate]."""
+        st, n = self.st, self.st.n
+        r = st.d * (c - st.c_off) / st.c_sc
+        x = st.beta * (r - self.knots)
+        ramps = (torch.clamp(x, min=0.0) + torch.log(1.0 + torch.exp(-torch.abs(x)))) / st.beta
+        m = st.b + (ramps * self.mw).sum()
+        win = torch.cat([s[1:n], m.reshape(1)])
+        t, gf = (win * self.lam).sum(), s[n]
+        if st.hold:
+            t = torch.maximum(t, st.b + st.H * gf)
+            gate = torch.sigmoid(st.beta * (r - st.r_h)) * torch.sigmoid(
+                (st.v_h - torch.abs(vx)) / st.v_w)
+            a = torch.where(gate > gf, st.a_on, st.a_off)
+            gf = a * gf + (1.0 - a) * gate
+        (a00, a01), (a10, a11) = (map(float, row) for row in st.A)
+        b0, b1 = map(float, st.Bv)
+        p, q = s[n + 1], s[n + 2]
+        nxt = torch.stack([gf, a00 * p + a01 * q + b0 * t, a10 * p + a11 * q + b1 * t])
+        return p * st.y_sc + st.y_off, torch.cat([win, nxt])
 
 
 class ChainStep(nn.Module):
@@ -348,9 +380,9 @@ def step_module(model_dir: str | Path | None = None, chain_dir: str | Path | Non
         nss = NumpyNSS(load_model(model_dir).model.double())
         return NSSStep(nss), 2, ("x_vx", "x_yaw"), "nss"
     from parknss.chain.deployed import load_chain
-    from parknss.config import SHIPPED_CHAIN
+    from parknss.config import SHIPPED_PLANT
 
-    dep = load_chain(chain_dir if chain_dir is not None else SHIPPED_CHAIN)
+    dep = load_chain(chain_dir if chain_dir is not None else SHIPPED_PLANT)
     mod = ChainStep(dep.rt)
     return mod, len(mod.layout.names), mod.layout.names, "chain"
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from parknss.config import SHIPPED_CHAIN
+from parknss.config import SHIPPED_PLANT
 from parknss.errors import ConfigError
 from parknss.plant import Commands, PlantOutput
 from parknss.sim.plants import ChainPlant, ReferencePlant, SimPlant, _TruthPlant
@@ -169,11 +169,11 @@ def make_hybrid(
     latch: bool = True,
 ) -> SimPlant:
     """The hybrid plant ``kind`` ("nss": truth actuators + chain NSS; "actuators": chain
-    actuators + truth body) from the chain artefact ``chain_path`` (default models/chain)
+    actuators + truth body) from the chain artefact ``chain_path`` (default models/plant)
     and the reference vehicle file ``vehicle_yaml`` with noise seed ``seed``."""
     if kind not in HYBRIDS:
         raise ConfigError(f"unknown hybrid plant {kind!r}; one of {', '.join(HYBRIDS)}")
-    chain = ChainPlant(chain_path or SHIPPED_CHAIN, geom).plant
+    chain = ChainPlant(chain_path or SHIPPED_PLANT, geom).plant
     ref = ReferencePlant(vehicle_yaml, seed)
     veh = ref.vehicle
     if kind == "nss":

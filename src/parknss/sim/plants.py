@@ -36,7 +36,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from parknss.config import SHIPPED_CHAIN
+from parknss.config import SHIPPED_PLANT
 from parknss.errors import CheckpointError, ConfigError, ParknssError
 from parknss.plant import Commands, Plant, PlantOutput
 from parknss.signals import DT
@@ -273,7 +273,7 @@ class ReferencePlant(_TruthPlant):
 class ChainPlant(_TruthPlant):
     """The learned command-to-vehicle chain (envelopes -> actuator models -> NSS).
 
-    Loads ``parknss.chain.load_chain(path)`` (default: the shipped chain in models/chain)
+    Loads ``parknss.chain.load_chain(path)`` (default: the deployed plant in models/plant)
     and steps it in real time. Raises :class:`~parknss.errors.CheckpointError` with one
     line when the checkpoint cannot be loaded; there is no stand-in.
     """
@@ -284,7 +284,7 @@ class ChainPlant(_TruthPlant):
                  engine: str = "numpy"):
         from parknss.chain import load_chain
 
-        p = Path(path) if path else SHIPPED_CHAIN
+        p = Path(path) if path else SHIPPED_PLANT
         try:
             chain = load_chain(p, engine=engine)
         except ParknssError:

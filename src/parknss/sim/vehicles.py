@@ -21,16 +21,16 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from parknss.config import SHIPPED_CHAIN
+from parknss.config import SHIPPED_PLANT
 from parknss.errors import CheckpointError
 from parknss.vehicle import VehicleGeometry, load_vehicle_geometry, same_geometry
 from parknss.vehicle_ranges import check_vehicle
 
 
 def chain_geometry(path: str | Path | None = None) -> VehicleGeometry | None:
-    """The vehicle geometry stored with a chain artefact (default: the shipped chain), or
+    """The vehicle geometry stored with a chain artefact (default: the deployed plant), or
     None when the folder holds none (or cannot be read)."""
-    folder = Path(path) if path else SHIPPED_CHAIN
+    folder = Path(path) if path else SHIPPED_PLANT
     meta = folder / "nss" / "model.json"
     try:
         geometry = json.loads(meta.read_text()).get("geometry")

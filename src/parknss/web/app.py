@@ -40,6 +40,8 @@ from parknss.web.jobs import ComputeRunner
 from parknss.web.schemas import (
     CellList,
     ErrorResponse,
+    FidelityRequest,
+    FidelityResponse,
     Grid,
     Health,
     ImportRequest,
@@ -162,6 +164,8 @@ def create_app(config: WebConfig | None = None) -> FastAPI:
           "plan_request")
     _post("/api/simulate", SimulateRequest, SimulateResponse, cfg.simulate_budget_s,
           "the simulation", "simulate")
+    _post("/api/fidelity", FidelityRequest, FidelityResponse, cfg.simulate_budget_s,
+          "the fidelity runs", "fidelity")
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:

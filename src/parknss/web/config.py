@@ -52,6 +52,9 @@ class WebConfig(StrictModel):
     planning_config: str | None = Field(None, description="planning YAML")
     scenarios_config: str | None = Field(None, description="scenarios YAML")
     vehicle: str | None = Field(None, description="vehicle YAML (None: the chain's car)")
+    fidelity_config: str | None = Field(
+        None, description="fidelity YAML: noise seeds, targets, ISO settings (parknss fidelity)"
+    )
     plant_colours: dict[str, str] = Field(
         default_factory=lambda: {
             "kinematic": "#00bcd4",

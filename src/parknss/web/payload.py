@@ -92,3 +92,19 @@ def decimate_series(series: dict[str, np.ndarray], rate_hz: float, max_points: i
         if name not in ("rate_hz", "stride")
     }
     return Series(rate_hz=LOOP_RATE_HZ / stride, stride=stride, **cols)
+
+
+def finite(doc: dict) -> dict:
+    """A flat dict of numbers, flags and text for JSON: floats rounded to 6 significant
+    digits, non-finite floats None (JSON null), NumPy scalars as Python ones."""
+    out = {}
+    for k, v in doc.items():
+        if isinstance(v, bool | np.bool_):
+            out[k] = bool(v)
+        elif isinstance(v, int | np.integer):
+            out[k] = int(v)
+        elif isinstance(v, float | np.floating):
+            out[k] = float(f"{float(v):.6g}") if math.isfinite(v) else None
+        else:
+            out[k] = v
+    return out

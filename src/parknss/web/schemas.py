@@ -54,6 +54,14 @@ class SimulateRequest(SceneRequest):
     seed: int | None = Field(None, description="reference-plant sensor-noise seed")
 
 
+class FidelityRequest(SceneRequest):
+    """A scene whose plan is driven under the learned chain and under the truth."""
+
+    seed: int | None = Field(
+        None, description="plant noise seed of both runs (None: the cell's parknss fidelity seed)"
+    )
+
+
 class ErrorResponse(BaseModel):
     """Every error: HTTP status and one line saying what is wrong."""
 
@@ -205,3 +213,34 @@ class SimulateResponse(BaseModel):
     plan: PlanResponse
     outcome: RunOutcome
     series: Series | None = Field(description="None when the scene was not plannable")
+
+
+class Run(BaseModel):
+    """One plant's execution of the plan."""
+
+    outcome: RunOutcome
+    series: Series | None
+
+
+class TargetCheck(BaseModel):
+    """One fidelity target on this cell (parknss.sim.fidelity.TargetLine)."""
+
+    label: str
+    measured: float | None
+    limit: float
+    passed: bool
+
+
+class FidelityResponse(BaseModel):
+    """The plan driven under the chain and the truth (same plan, same noise seed) and the
+    chain's closed-loop fidelity (parknss fidelity's numbers for this one cell)."""
+
+    plan: PlanResponse
+    seed: int = Field(description="plant noise seed of both runs")
+    chain: Run
+    truth: Run = Field(description="the reference vehicle's run")
+    fidelity: dict[str, Any] | None = Field(
+        description="parknss.sim.fidelity.CellFidelity fields (diff = chain - truth; cm, deg, "
+        "s); None when the scene was not plannable"
+    )
+    targets: list[TargetCheck] = Field(description="the fidelity targets on this cell")

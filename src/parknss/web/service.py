@@ -40,20 +40,26 @@ from parknss.web.errors import BadSceneError, PlantUnavailableError
 from parknss.web.schemas import (
     CellInfo,
     CellList,
+    FidelityRequest,
+    FidelityResponse,
     Health,
     ImportRequest,
     ImportResponse,
     PlanResponse,
     PlantInfo,
+    Run,
     RunOutcome,
     SceneRequest,
     SceneResponse,
     SimulateRequest,
     SimulateResponse,
+    TargetCheck,
     VehicleInfo,
 )
 
 GRID_SIZES = {"36": sc.N_CELLS, "252": sc.N_ROBUST}
+FIDELITY_PLANTS = ("chain", "reference")
+"""The candidate and the truth of the fidelity view, in that order."""
 
 
 def scene_key(scene: sc.Scene) -> str:
@@ -118,9 +124,9 @@ class SimulatorService:
     def _chain_stamp(self) -> tuple:
         """(name, size, mtime) of every file of the chain artefact: what decides whether the
         chain plant can be built, cheap to read (no hashing, no loading)."""
-        from parknss.config import SHIPPED_CHAIN
+        from parknss.config import SHIPPED_PLANT
 
-        root = Path(self.closed_loop.chain_path or SHIPPED_CHAIN)
+        root = Path(self.closed_loop.chain_path or SHIPPED_PLANT)
         try:
             files = sorted(p for p in root.rglob("*") if p.is_file())
             return tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
@@ -321,6 +327,60 @@ class SimulatorService:
             _, (outcome,) = run_cell(
                 scene, [req.plant], cfg, self.interface, None, self.geom, plan.trajectory
             )
+        run = self._run(outcome, cfg.plant_seed if req.plant == "reference" else None)
+        return SimulateResponse(
+            plan=self.plan_response(scene, plan, cached), outcome=run.outcome, series=run.series
+        )
+
+    def fidelity(self, req: FidelityRequest) -> FidelityResponse:
+        """Drive the scene's plan under the chain and under the truth with one plant noise
+        seed (``req.seed``, else the seed ``parknss fidelity`` gives this cell) and score
+        the chain's run against the truth's (:func:`parknss.sim.fidelity.compare_outcomes`,
+        the targets of the fidelity config on this one cell)."""
+        from parknss.sim.fidelity import (
+            cell_seed,
+            compare_outcomes,
+            load_fidelity_config,
+            summarize_fidelity,
+        )
+
+        fcfg = load_fidelity_config(self.cfg.fidelity_config)
+        scene = self.resolve(req)
+        for kind in FIDELITY_PLANTS:
+            self._make_plant(kind, None)  # fail fast, before planning
+        plan, cached = self.plan(scene)
+        if req.seed is not None:
+            seed = int(req.seed)
+        else:  # the spec parknss fidelity names the cell by (fidelity_specs)
+            spec = scene.meta.name if req.index is None else (
+                f"robust:{req.index}" if req.grid == "252" else str(req.index))
+            seed = cell_seed(fcfg.seed, spec)
+        cfg = self._loop_config(seed)
+        if plan.trajectory is None:
+            chain, truth = (not_plannable(k, plan) for k in FIDELITY_PLANTS)
+        else:
+            _, (chain, truth) = run_cell(
+                scene, list(FIDELITY_PLANTS), cfg, self.interface, None, self.geom,
+                plan.trajectory,
+            )  # fmt: skip
+        cell = None
+        targets: list[TargetCheck] = []
+        if plan.trajectory is not None:
+            cell = compare_outcomes(chain, truth, scene.meta.name, fcfg.iso)
+            summary = summarize_fidelity([cell], fcfg.targets)
+            targets = [TargetCheck(label=t.label, measured=t.measured, limit=t.limit,
+                                   passed=t.passed) for t in summary.targets]  # fmt: skip
+        return FidelityResponse(
+            plan=self.plan_response(scene, plan, cached),
+            seed=seed,
+            chain=self._run(chain, None),
+            truth=self._run(truth, seed),
+            fidelity=None if cell is None else payload.finite(cell.to_json()),
+            targets=targets,
+        )
+
+    def _run(self, outcome, seed: int | None) -> Run:
+        """The response form of a closed-loop outcome: its numbers and decimated series."""
         doc = outcome.to_json()
         result = RunOutcome(
             plant=outcome.plant,
@@ -335,7 +395,7 @@ class SimulatorService:
             driven_length_m=round(outcome.driven_length_m, 3),
             gear_changes=outcome.gear_changes,
             steps=outcome.steps,
-            seed=cfg.plant_seed if req.plant == "reference" else None,
+            seed=seed,
         )
         series = (
             payload.decimate_series(
@@ -344,6 +404,4 @@ class SimulatorService:
             if outcome.series
             else None
         )
-        return SimulateResponse(
-            plan=self.plan_response(scene, plan, cached), outcome=result, series=series
-        )
+        return Run(outcome=result, series=series)

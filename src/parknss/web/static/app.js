@@ -346,7 +346,110 @@ async function runSelected() {
   if (errors.length) showError(errors.join(" · "));
 }
 
+// ---------------------------------------------------------------------------------------
+// Fidelity: the plan under the chain and the truth, scored as parknss fidelity scores a cell
+
+async function runFidelity() {
+  clearError();
+  const seedText = $("seed").value.trim();
+  const seed = seedText === "" ? null : Number(seedText);
+  if (seed !== null && !Number.isInteger(seed)) {
+    showError("the seed must be a whole number");
+    return;
+  }
+  const tok = ++state.token;
+  const signal = newRequest();
+  state.cancelled = false;
+  clearRuns();
+  setBusy("running the chain and the truth…", budget("simulate"));
+  const req = sceneRequest();
+  if (seed !== null) req.seed = seed;
+  try {
+    const doc = await api("/api/fidelity", req, signal);
+    if (tok !== state.token) return;
+    state.plan = doc.plan;
+    renderPlanInfo();
+    for (const [plant, run] of [["chain", doc.chain], ["reference", doc.truth]]) {
+      if (run.series) {
+        state.runs.push({ plant, colour: plantColour(plant), outcome: run.outcome, series: run.series });
+        state.tmax = Math.max(state.tmax, ...run.series.t.filter((v) => v !== null));
+      }
+      addOutcomeRow(plant, run.outcome, null);
+    }
+    if (state.runs.length) startPlayback();
+    updatePlayer();
+    if (doc.fidelity) renderFidelity(doc);
+    else showError(`not plannable (${doc.plan.reason})`);
+  } catch (err) {
+    if (tok !== state.token) return;
+    showError(err.message);
+  }
+  setBusy("");
+  renderPlots();
+  render();
+}
+
+function tableRow(texts, title) {
+  const tr = document.createElement("tr");
+  for (const text of texts) {
+    const td = document.createElement("td");
+    td.textContent = text;
+    tr.append(td);
+  }
+  if (title) tr.title = title;
+  return tr;
+}
+
+function fidelityRow(label, chain, truth, diff, title) {
+  return tableRow([label, chain, truth, diff], title);
+}
+
+function renderFidelity(doc) {
+  const f = doc.fidelity;
+  const body = $("fidelity").querySelector("tbody");
+  body.textContent = "";
+  const pm = (v, d) => (v === null || v === undefined ? "–" : (v > 0 ? "+" : "") + fmt(v, d));
+  body.append(
+    fidelityRow("outcome", f.chain_reason, f.truth_reason, f.outcome_agree ? "same" : "differs"),
+    fidelityRow("time [s]", fmt(f.chain_duration_s, 1), fmt(f.truth_duration_s, 1),
+      `× ${fmt(f.duration_ratio, 3)}`),
+    fidelityRow("goal err [cm]", fmt(f.chain_goal_cm, 2), fmt(f.truth_goal_cm, 2),
+      pm(f.goal_diff_cm, 2)),
+    fidelityRow("heading [°]", "", "", pm(f.heading_diff_deg, 2), "heading error, chain - truth"),
+    fidelityRow("clearance [cm]", fmt(f.chain_clearance_cm, 1), fmt(f.truth_clearance_cm, 1),
+      pm(f.clearance_diff_cm, 1)),
+    fidelityRow("forward / reverse [s]",
+      `${fmt(f.chain_forward_s, 1)} / ${fmt(f.chain_reverse_s, 1)}`,
+      `${fmt(f.truth_forward_s, 1)} / ${fmt(f.truth_reverse_s, 1)}`, "",
+      "time with the tracker requesting forward / reverse"),
+    fidelityRow("gear changes", String(f.chain_gear_changes), String(f.truth_gear_changes),
+      f.gear_sequence_agree ? `same, |Δt| ${fmt(f.gear_timing_mean_s, 2)} s` : "differ"),
+    fidelityRow("ISO vx / ω_z", "", "", `${fmt(f.iso_vx, 3)} / ${fmt(f.iso_yaw_rate, 3)}`,
+      "ISO/TS 18571 rating of the chain's trace against the truth's (1 = identical)"),
+  );
+  const targets = $("fidelity-targets").querySelector("tbody");
+  targets.textContent = "";
+  for (const t of doc.targets) {
+    const tr = document.createElement("tr");
+    const verdict = document.createElement("td");
+    verdict.textContent = t.passed ? "PASS" : "FAIL";
+    verdict.className = t.passed ? "result-completed" : "result-failed";
+    const what = document.createElement("td");
+    what.textContent = `${t.label}: ${fmt(t.measured, 3)} (target ${t.limit})`;
+    tr.append(verdict, what);
+    targets.append(tr);
+  }
+  const cells = $("fidelity-cells").querySelector("tbody");
+  const iso = f.iso_vx === null || f.iso_yaw_rate === null ? null : (f.iso_vx + f.iso_yaw_rate) / 2;
+  const abs = (v) => (v === null || v === undefined ? null : Math.abs(v));
+  cells.append(tableRow([f.cell, f.outcome_agree ? "yes" : "no", fmt(f.duration_ratio, 3),
+    fmt(abs(f.goal_diff_cm), 2), fmt(abs(f.clearance_diff_cm), 1), fmt(iso, 3)],
+  `noise seed ${doc.seed}`));
+  $("fidelity-section").hidden = false;
+}
+
 function clearRuns() {
+  for (const id of ["fidelity", "fidelity-targets"]) $(id).querySelector("tbody").textContent = "";
   state.runs = [];
   state.t = 0;
   state.tmax = 0;
@@ -1267,6 +1370,7 @@ function wire() {
   });
   $("plan-btn").addEventListener("click", () => { clearRuns(); plan(); });
   $("run-btn").addEventListener("click", runSelected);
+  $("fidelity-btn").addEventListener("click", runFidelity);
   $("play").addEventListener("click", togglePlay);
   $("cancel").addEventListener("click", cancelRequest);
   $("speed").addEventListener("change", (ev) => { state.speed = Number(ev.target.value); });
