@@ -1,7 +1,7 @@
 """``parknss demo``: the main job on the bundled synthetic campaign and the shipped plant.
 
 Describes the campaign, evaluates and rates the shipped NSS and chain, parks one grid cell
-through the kinematic plant and the learned chain, and writes every figure and
+through the kinematic plant and the deployed plant (models/plant), and writes every figure and
 ``summary.json`` to ``--out`` (:func:`parknss.experiments.demo.run_demo`), a run folder
 refused if it holds anything but the same demo unless ``--overwrite``. ``--json`` prints
 the summary document (what ``summary.json`` holds) on stdout, the tables and progress on

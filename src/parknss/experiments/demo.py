@@ -162,7 +162,8 @@ def run_demo(inputs: DemoInputs, log: Say = _quiet, show: Say = _quiet) -> dict:
         doc["figures"]["fig7"] = rating.doc["files"]["figure"]
         show(rating.table.table())
 
-        log(f"4/4 closed loop: cell {inputs.cell} under the kinematic plant and the learned chain")
+        log(f"4/4 closed loop: cell {inputs.cell} under the kinematic plant and the deployed "
+            "plant (models/plant)")
         run = simulate_scene(str(inputs.cell), ["kinematic", "chain"])
         doc["closed_loop"] = closed_loop_doc(run)
         doc["figures"].update(draw_scene_run(run, out))
