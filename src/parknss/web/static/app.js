@@ -291,6 +291,26 @@ function selectedPlants() {
   return [...document.querySelectorAll("#plants input:checked")].map((cb) => cb.value);
 }
 
+// The seed box: null when empty, undefined (an error shown) when not a whole number.
+function readSeed() {
+  const seedText = $("seed").value.trim();
+  const seed = seedText === "" ? null : Number(seedText);
+  if (seed !== null && !Number.isInteger(seed)) {
+    showError("the seed must be a whole number");
+    return undefined;
+  }
+  return seed;
+}
+
+// A new batch of runs: the request token and abort signal, the previous runs cleared.
+function startRuns() {
+  const tok = ++state.token;
+  const signal = newRequest();
+  state.cancelled = false;
+  clearRuns();
+  return { tok, signal };
+}
+
 async function runSelected() {
   clearError();
   const plants = selectedPlants();
@@ -298,16 +318,9 @@ async function runSelected() {
     showError("select at least one plant");
     return;
   }
-  const seedText = $("seed").value.trim();
-  const seed = seedText === "" ? null : Number(seedText);
-  if (seed !== null && !Number.isInteger(seed)) {
-    showError("the seed must be a whole number");
-    return;
-  }
-  const tok = ++state.token;
-  const signal = newRequest();
-  state.cancelled = false;
-  clearRuns();
+  const seed = readSeed();
+  if (seed === undefined) return;
+  const { tok, signal } = startRuns();
   const errors = [];
   for (const [i, plant] of plants.entries()) {
     const of = plants.length > 1 ? ` (${i + 1} of ${plants.length})` : "";
@@ -351,16 +364,9 @@ async function runSelected() {
 
 async function runFidelity() {
   clearError();
-  const seedText = $("seed").value.trim();
-  const seed = seedText === "" ? null : Number(seedText);
-  if (seed !== null && !Number.isInteger(seed)) {
-    showError("the seed must be a whole number");
-    return;
-  }
-  const tok = ++state.token;
-  const signal = newRequest();
-  state.cancelled = false;
-  clearRuns();
+  const seed = readSeed();
+  if (seed === undefined) return;
+  const { tok, signal } = startRuns();
   setBusy("running the chain and the truth…", budget("simulate"));
   const req = sceneRequest();
   if (seed !== null) req.seed = seed;
