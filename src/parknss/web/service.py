@@ -337,6 +337,7 @@ class SimulatorService:
         seed (``req.seed``, else the seed ``parknss fidelity`` gives this cell) and score
         the chain's run against the truth's (:func:`parknss.sim.fidelity.compare_outcomes`,
         the targets of the fidelity config on this one cell)."""
+        from parknss.experiments.fidelity import fidelity_specs
         from parknss.sim.fidelity import (
             cell_seed,
             compare_outcomes,
@@ -351,9 +352,9 @@ class SimulatorService:
         plan, cached = self.plan(scene)
         if req.seed is not None:
             seed = int(req.seed)
-        else:  # the spec parknss fidelity names the cell by (fidelity_specs)
+        else:  # the spec parknss fidelity names a grid cell by; a scene's name otherwise
             spec = scene.meta.name if req.index is None else (
-                f"robust:{req.index}" if req.grid == "252" else str(req.index))
+                fidelity_specs(grid=req.grid, cells=str(req.index))[0])
             seed = cell_seed(fcfg.seed, spec)
         cfg = self._loop_config(seed)
         if plan.trajectory is None:
