@@ -26,12 +26,12 @@ torch.set_num_threads(1)
 SCALING = Scaling(-0.4, 0.4, (0.5,), (0.5,), 8.0, 8.0)
 
 
-def _random_brake(variant: str, seed: int):
+def _random_brake(variant: str, seed: int, release: str = "exp"):
     """A monolag brake with its parameters scattered at random (the properties hold for
-    every parameter value, not only for a good fit)."""
+    every parameter value, not only for a good fit), its hold released by ``release``."""
     spec = CandidateSpec("brake", "monolag", variant)
     sc = SCALING if spec.features else Scaling(-0.4, 0.4, (), (), 8.0, 8.0)
-    m = build_candidate(spec, sc, ArchConfig())
+    m = build_candidate(spec, sc, ArchConfig(monolag_release=release))
     m.init_affine(-1.0, 0.0, np.zeros(len(spec.features)))
     g = torch.Generator().manual_seed(seed)
     with torch.no_grad():
@@ -53,11 +53,12 @@ def _run(m, cmd: np.ndarray, speed: float = 0.0, settle: int = 0) -> np.ndarray:
 
 @pytest.mark.parametrize("variant,speed", [("cmd", 0.0), ("phys", 0.0), ("phys", 0.5)])
 @pytest.mark.parametrize("seed", range(4))
-def test_no_pulse_after_a_pulse_leaves_the_window(variant, speed, seed):
+@pytest.mark.parametrize("release", ["exp", "ramp"])
+def test_no_pulse_after_a_pulse_leaves_the_window(variant, speed, seed, release):
     """A 0.5 s brake pulse, then no request for 4 s: once the pulse has passed the dead
     time, the output only falls (the 1 s NARX brake put out a phantom 7.8 bar pulse when
     the pulse left its 100-sample window); in particular nothing rises 1 s later."""
-    m = _random_brake(variant, seed)
+    m = _random_brake(variant, seed, release)
     k0, k1, T = 100, 150, 550
     cmd = np.zeros(T)
     cmd[k0:k1] = -0.6
@@ -72,11 +73,12 @@ def test_no_pulse_after_a_pulse_leaves_the_window(variant, speed, seed):
 
 @pytest.mark.parametrize("variant,speed", [("cmd", 0.0), ("phys", 0.0), ("phys", 0.5)])
 @pytest.mark.parametrize("seed", range(4))
-def test_steady_state_is_monotone_in_the_request(variant, speed, seed):
+@pytest.mark.parametrize("release", ["exp", "ramp"])
+def test_steady_state_is_monotone_in_the_request(variant, speed, seed, release):
     """A constant request held 6 s: the final pressure never falls as the request deepens,
     and under a constant request the pressure settles without a dip (the NARX brake fell
     from 5.8 to 1.6 bar under a constant -0.8 m/s²)."""
-    m = _random_brake(variant, seed)
+    m = _random_brake(variant, seed, release)
     levels = np.linspace(0.0, -0.8, 17)
     finals = []
     for a in levels:
@@ -90,12 +92,13 @@ def test_steady_state_is_monotone_in_the_request(variant, speed, seed):
 
 
 @pytest.mark.parametrize("variant", ["cmd", "phys"])
-def test_a_deeper_request_anywhere_never_lowers_the_output(variant):
+@pytest.mark.parametrize("release", ["exp", "ramp"])
+def test_a_deeper_request_anywhere_never_lowers_the_output(variant, release):
     """Order preservation (ζ >= 1: the lag's impulse response is non-negative): command
     histories c1 <= c2 sample by sample give outputs y1 >= y2 at every sample."""
     rng = np.random.default_rng(3)
     for seed in range(3):
-        m = _random_brake(variant, seed)
+        m = _random_brake(variant, seed, release)
         c2 = np.repeat(rng.uniform(-0.8, 0.0, 40), 15)
         c1 = c2 - rng.uniform(0.0, 0.3, c2.size) * (rng.uniform(size=c2.size) < 0.3)
         for speed in (0.0, 0.2, 0.6):
@@ -185,3 +188,61 @@ def test_a_hold_speed_ceiling_keeps_the_hold_off_a_moving_car(seed):
     assert at_rest[-1] > twin[-1] + 1.0  # and it does arm at rest
     default = build_candidate(CandidateSpec("brake", "monolag", "phys"), SCALING, ArchConfig())
     assert "log_v_hold" in default.state_dict() and "logit_v_hold" not in default.state_dict()
+
+
+def _held_then_released(m, T_hold: int = 200, T_free: int = 300):
+    """(cmd (1, T), feat (1, T, 1)): a full request at standstill, then no request."""
+    cmd = torch.cat([torch.full((1, T_hold), -0.8), torch.zeros(1, T_free)], 1).double()
+    return cmd, torch.zeros(1, T_hold + T_free, 1, dtype=torch.float64)
+
+
+def test_a_ramp_release_falls_linearly_to_none_in_tau_off():
+    """``monolag_release: ramp``: a full hold (g_f -> 1) released by a zero gate falls by
+    dt/τ_off per sample and is gone after τ_off (the chassis auto-hold's ramp-out); the
+    exponential release is still at e^-1 after τ_off."""
+    tau = 0.5
+    for release in ("ramp", "exp"):
+        m = build_candidate(CandidateSpec("brake", "monolag", "phys"), SCALING,
+                            ArchConfig(monolag_release=release, monolag_release_tau_s=tau))
+        a_on, off = m.hold_rates()
+        gf, g = torch.ones(1, dtype=torch.float64), torch.zeros(1, dtype=torch.float64)
+        trace = [1.0]
+        for _ in range(round(tau / DT) + 5):
+            gf = m.hold_filter(gf, g, a_on, off)
+            trace.append(float(gf))
+        n = round(tau / DT)
+        if release == "ramp":
+            assert np.allclose(np.diff(trace[: n + 1]), -DT / tau, atol=1e-12)
+            assert trace[n] == pytest.approx(0.0, abs=1e-12) and max(trace[n:]) == 0.0
+        else:
+            assert trace[n] == pytest.approx(np.exp(-1.0), rel=1e-9)
+
+
+@pytest.mark.parametrize("release", ["exp", "ramp"])
+def test_rollout_step_and_twin_agree_through_a_hold_and_its_release(release):
+    """The training rollout, the torch step and the NumPy twin give the same pressure
+    through a hold that engages at standstill and is released (1e-10)."""
+    m = _random_brake("phys", 0, release)
+    with torch.no_grad():
+        m.r_hold.fill_(-0.5)
+        m.log_v_hold.fill_(np.log(0.07))
+        m.rho_hold.fill_(2.0)
+    cmd, feat = _held_then_released(m)
+    y0 = torch.tensor([0.5], dtype=torch.float64)
+    with torch.no_grad():
+        Y = m.rollout(cmd, feat, y0)[0]
+        st = m.init_state(cmd[:, 0], y0)
+        ys = []
+        for k in range(cmd.shape[1]):
+            y, st = m.step(st, cmd[:, k], feat[:, k])
+            ys.append(float(y[0]))
+    tw = m.stepper()
+    tw.reset(float(cmd[0, 0]), 0.5)
+    yn, gfs = [], []
+    for k in range(cmd.shape[1]):
+        yn.append(tw.step(float(cmd[0, k]), feat[0, k].numpy()))
+        gfs.append(tw.gf)
+    assert np.max(np.abs(np.array(ys) - Y.numpy())) < 1e-10
+    assert np.max(np.abs(np.array(yn) - Y.numpy())) < 1e-10
+    assert max(gfs) > 0.9 and gfs[-1] < 1e-3  # the hold engaged, then released
+    assert float(st[1][0]) == pytest.approx(tw.gf, abs=1e-12)

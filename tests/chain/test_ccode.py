@@ -135,12 +135,13 @@ def test_c_tanh_is_within_1_4_ulp_and_odd(chains):
     assert np.isnan(y[np.isnan(x)]).all()
 
 
+@pytest.mark.parametrize("release", ["exp", "ramp"])
 def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_step_it(
-        actuator_campaign, actuator_nss, tmp_path):
+        actuator_campaign, actuator_nss, tmp_path, release):
     """The monotone brake (models/plant's) travels in the artefact (its structure config
-    with it) and steps identically after loading; the generated C steps it as the NumPy
-    twin does (1e-9) and the ONNX step as well (float32, 1e-5), the hold gate's state
-    included."""
+    with it, the hold's release shape included) and steps identically after loading; the
+    generated C steps it as the NumPy twin does (1e-9) and the ONNX step as well (float32,
+    1e-5), the hold gate's state included."""
     import onnxruntime as ort
 
     from parknss.chain import load_chain
@@ -150,19 +151,24 @@ def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_step_it(
 
     camp = list(actuator_campaign)
     nss, ncfg = actuator_nss
-    cfg = tiny_config()
+    cfg = tiny_config(arch={"monolag_release": release})
     env = identify_envelope(camp, cfg.envelope)
     names = {"drive": "drive/lag1/cmd", "brake": "brake/monolag/phys",
              "steering": "steering/lag1/cmd"}
     models = {ch: fit_candidate(CandidateSpec.parse(n), camp[:3], cfg, env)[0]
               for ch, n in names.items()}
+    with torch.no_grad():  # the tiny random NSS never stands still: arm the gate at any speed
+        models["brake"].log_v_hold.fill_(np.log(50.0))
     chain = make_chain(nss, models, env, NSSProvenance(ncfg, {}))
     folder = save_chain(tmp_path / "chain", chain, {})
     dep = load_chain(folder)
     assert dep.chain.model("brake").spec.name == "brake/monolag/phys"
     assert dep.rt.steppers["brake"].hold  # the speed feature arms the hold
+    assert dep.rt.steppers["brake"].ramp == (release == "ramp")
     tr = camp[0]
     cm = tr.array(("gear", "torque_cmd", "decel_cmd", "steer_cmd")).copy()
+    hold = np.tile([cm[-1, 0], 0.0, -0.8, 0.0], (300, 1))  # a held stop, then a release
+    cm = np.vstack([cm, hold, np.tile([cm[-1, 0], 0.0, 0.0, 0.0], (200, 1))])
     x0 = [tr["vx"][0], tr["yaw_rate"][0]]
     y0 = [tr["torque"][0], tr["brake_pressure"][0], tr["steer"][0]]
     a = _replay(DeployedChain(chain).rt, cm, x0, y0)
@@ -175,11 +181,14 @@ def test_a_monolag_brake_chain_round_trips_and_c_and_onnx_step_it(
                                 so, providers=["CPUExecutionProvider"])
     rt = dep.rt
     rt.start(x0, y0, cm[0])
-    worst = 0.0
+    worst, gfs = 0.0, []
     for k in range(len(cm)):
         nxt, out = sess.run(None, {"state": chain_state(rt).astype(np.float32),
                                    "command": cm[k].astype(np.float32)})
         act, st = rt.step(*cm[k])
+        gfs.append(rt.steppers["brake"].gf)
         for got, ref in ((out, np.array([*act, *st, rt.gear])), (nxt, chain_state(rt))):
             worst = max(worst, float(np.max(np.abs(got - ref) / np.maximum(1.0, np.abs(ref)))))
     assert worst <= 1e-5
+    gf = np.array(gfs)  # the trial engages the hold and releases it: both branches ran
+    assert gf.max() > 0.5 and np.sum(np.diff(gf) < -1e-3) > 10

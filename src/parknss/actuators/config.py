@@ -9,6 +9,8 @@ budgets, split, shortlist size) is a named value here, with the reason in docs/a
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field, model_serializer
 
 from parknss.config import StrictModel, load_config
@@ -46,7 +48,12 @@ class ArchConfig(StrictModel):
     monolag_hold_tau_s: float = Field(0.3, gt=0.0, description="initial engage time "
                                       "constant of the hold, s")
     monolag_release_tau_s: float = Field(0.4, gt=0.0, description="initial release time "
-                                         "constant of the hold, s")
+                                         "of the hold, s: the exponential's time constant, "
+                                         "or the ramp's duration from full hold to none")
+    monolag_release: Literal["exp", "ramp"] = Field(
+        "exp", description="shape of the hold's release: 'exp' (first-order, pole "
+        "exp(-dt/τ_off)) or 'ramp' (linear, slope dt/τ_off per sample, the chassis "
+        "auto-hold's ramp-out at a launch; docs/actuators.md)")
 
     @model_serializer(mode="wrap")
     def _omit_default_monolag(self, handler) -> dict:

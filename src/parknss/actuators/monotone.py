@@ -14,9 +14,11 @@ has d = -1, so a deeper deceleration request is a larger r):
 * hold (only with a speed feature, ``speed`` or ``vx``: the ``phys`` and ``uniform``
   variants): gate g[k] = σ(β(r[k] - r_h))·σ((v_h - |vx[k]|)/v_w) (armed by a request at
   standstill; v_h = exp(ρ_v), or v_max·σ(ρ_v) below a ceiling ``monolag_hold_speed_max_ms``),
-  filtered g_f[k+1] = a·g_f[k] + (1 - a)·g[k], g_f[0] = 0,
-  a = exp(-dt/τ_on) while g[k] > g_f[k] (engaging), else exp(-dt/τ_off) (releasing, as
-  the car ramps its hold out at a launch); target t = max(m_d, b + H·g_f), H = sp(ρ_H)
+  filtered, g_f[0] = 0: while g[k] > g_f[k] (engaging) g_f[k+1] = a·g_f[k] + (1 - a)·g[k],
+  a = exp(-dt/τ_on); else (releasing, as the car ramps its hold out at a launch) the same
+  with a = exp(-dt/τ_off) (``monolag_release: exp``), or the linear ramp
+  g_f[k+1] = max(g[k], g_f[k] - dt/τ_off) (``ramp``: a full hold is gone after τ_off, the
+  shape of a chassis auto-hold's ramp-out); target t = max(m_d, b + H·g_f), H = sp(ρ_H)
   >= 0: the pressure floor of the chassis auto-hold, which no command explains;
 * second-order lag p'' = ω²(t - p) - 2ζω p' (the ``lag2`` discretisation) with
   ζ = 1 + sp(ρ_ζ) >= 1 (no oscillation), p[0] = y0, y[k] = p[k] (reacts one sample later,
@@ -82,6 +84,7 @@ class MonoLag(ActuatorModel):
         self.speed_idx = speed_index(spec.features)
         self.hold = self.speed_idx is not None
         self.v_width = float(cfg.monolag_hold_width_ms)
+        self.release_ramp = cfg.monolag_release == "ramp"
         self.register_buffer("direction", torch.tensor(1.0, dtype=f64))
         self.register_buffer("knots", torch.linspace(-1.0, 1.0, K, dtype=f64))
         self.rho = nn.Parameter(torch.full((K,), -4.0, dtype=f64))
@@ -171,16 +174,21 @@ class MonoLag(ActuatorModel):
         still = torch.sigmoid((self.hold_speed() - speed) / self.v_width)
         return armed * still
 
-    def hold_poles(self) -> tuple[Tensor, Tensor]:
-        """(a_on, a_off): the hold filter's poles while it engages and while it releases."""
+    def hold_rates(self) -> tuple[Tensor, Tensor]:
+        """(a_on, off): the engage pole exp(-dt/τ_on), and the release pole exp(-dt/τ_off)
+        (``exp``) or the release slope dt/τ_off per sample (``ramp``)."""
         on = torch.exp(-self.dt * torch.exp(-self.log_tau_hold))
-        return on, torch.exp(-self.dt * torch.exp(-self.log_tau_release))
+        rate = self.dt * torch.exp(-self.log_tau_release)
+        return on, rate if self.release_ramp else torch.exp(-rate)
 
-    @staticmethod
-    def hold_filter(gf: Tensor, g: Tensor, a_on: Tensor, a_off: Tensor) -> Tensor:
+    def hold_filter(self, gf: Tensor, g: Tensor, a_on: Tensor, off: Tensor) -> Tensor:
         """g_f[k+1] from g_f[k] and g[k] (B,): toward g with the engage pole when g is
-        above g_f, else the release pole (non-decreasing in g either way)."""
-        a = torch.where(g > gf, a_on, a_off)
+        above g_f, else released by the pole or the ramp (continuous at g = g_f and
+        non-decreasing in g and g_f either way)."""
+        if self.release_ramp:
+            up = a_on * gf + (1.0 - a_on) * g
+            return torch.where(g > gf, up, torch.maximum(g, gf - off))
+        a = torch.where(g > gf, a_on, off)
         return a * gf + (1.0 - a) * g
 
     def floor(self, gf: Tensor) -> Tensor:
@@ -198,10 +206,10 @@ class MonoLag(ActuatorModel):
         t = (win * self.delay_kernel()).sum(-1)
         if self.hold:
             g = self.gate(r, feat)
-            a_on, a_off = self.hold_poles()
+            a_on, off = self.hold_rates()
             gfs = [torch.zeros_like(r[:, 0])]
             for k in range(T - 1):  # the asymmetric filter is not a linear scan
-                gfs.append(self.hold_filter(gfs[-1], g[:, k], a_on, a_off))
+                gfs.append(self.hold_filter(gfs[-1], g[:, k], a_on, off))
             t = torch.maximum(t, self.floor(torch.stack(gfs, dim=1)))
         A, Bv = self.discrete()
         x0 = torch.stack([self.sc_y(y0.to(r.dtype)), torch.zeros_like(r[:, 0])], dim=-1)
@@ -221,7 +229,7 @@ class MonoLag(ActuatorModel):
         t = (win * self.delay_kernel()).sum(-1)
         if self.hold:
             t = torch.maximum(t, self.floor(gf))
-            gf = self.hold_filter(gf, self.gate(r, feat), *self.hold_poles())
+            gf = self.hold_filter(gf, self.gate(r, feat), *self.hold_rates())
         A, Bv = self.discrete()
         p1 = A[0, 0] * p + A[0, 1] * pr + Bv[0] * t
         r1 = A[1, 0] * p + A[1, 1] * pr + Bv[1] * t

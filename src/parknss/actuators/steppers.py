@@ -224,7 +224,9 @@ class MonoLagStepper(Stepper):
             self.v_h = float(model.hold_speed().detach())
             self.v_w = model.v_width
             self.a_on = math.exp(-self.dt * math.exp(-float(p["log_tau_hold"])))
-            self.a_off = math.exp(-self.dt * math.exp(-float(p["log_tau_release"])))
+            self.ramp = model.release_ramp
+            rate = self.dt * math.exp(-float(p["log_tau_release"]))
+            self.off = rate if self.ramp else math.exp(-rate)  # slope or pole (monotone.py)
         self.buf = np.zeros(2 * self.n)
         self.i = 0
         self.gf = self.pos = self.rate = 0.0
@@ -249,8 +251,12 @@ class MonoLagStepper(Stepper):
             speed = 0.0 if f is None else abs(float(f[self.idx]))
             g = (1.0 / (1.0 + math.exp(-self.beta * (r - self.r_h)))) * (
                 1.0 / (1.0 + math.exp(-(self.v_h - speed) / self.v_w)))
-            a = self.a_on if g > self.gf else self.a_off
-            self.gf = a * self.gf + (1.0 - a) * g
+            if g > self.gf:
+                self.gf = self.a_on * self.gf + (1.0 - self.a_on) * g
+            elif self.ramp:
+                self.gf = max(g, self.gf - self.off)
+            else:
+                self.gf = self.off * self.gf + (1.0 - self.off) * g
         (a00, a01), (a10, a11) = self.A
         p, q = self.pos, self.rate
         out = p * self.y_sc + self.y_off

@@ -271,8 +271,14 @@ def _monolag(ch: str, st: MonoLagStepper, w: _Writer) -> tuple[str, str]:
                 "    if (fl > t) t = fl;\n"
                 f"    double gate = (1.0 / (1.0 + exp(-{beta} * (r - {_num(st.r_h)})))) *\n"
                 f"        (1.0 / (1.0 + exp(-({_num(st.v_h)} - fabs(vx)) / {_num(st.v_w)})));\n"
-                f"    double a = gate > s->{ch}.gf ? {_num(st.a_on)} : {_num(st.a_off)};\n"
-                f"    s->{ch}.gf = a * s->{ch}.gf + (1.0 - a) * gate;\n")
+                f"    if (gate > s->{ch}.gf)\n"
+                f"        s->{ch}.gf = {_num(st.a_on)} * s->{ch}.gf"
+                f" + {_num(1.0 - st.a_on)} * gate;\n")
+        if st.ramp:
+            hold += (f"    else s->{ch}.gf = fmax(gate, s->{ch}.gf - {_num(st.off)});\n")
+        else:
+            hold += (f"    else s->{ch}.gf = {_num(st.off)} * s->{ch}.gf"
+                     f" + {_num(1.0 - st.off)} * gate;\n")
     (a00, a01), (a10, a11) = st.A
     b0, b1 = st.Bv
     step = (f"    double r = {r};\n" + _monolag_map(ch, st, kn, wn, "r")

@@ -281,8 +281,12 @@ class _Channel(nn.Module):
             t = torch.maximum(t, st.b + st.H * gf)
             gate = torch.sigmoid(st.beta * (r - st.r_h)) * torch.sigmoid(
                 (st.v_h - torch.abs(vx)) / st.v_w)
-            a = torch.where(gate > gf, st.a_on, st.a_off)
-            gf = a * gf + (1.0 - a) * gate
+            up = st.a_on * gf + (1.0 - st.a_on) * gate
+            if st.ramp:
+                down = torch.maximum(gate, gf - st.off)
+            else:
+                down = st.off * gf + (1.0 - st.off) * gate
+            gf = torch.where(gate > gf, up, down)
         (a00, a01), (a10, a11) = (map(float, row) for row in st.A)
         b0, b1 = map(float, st.Bv)
         p, q = s[n + 1], s[n + 2]
