@@ -54,7 +54,7 @@ def test_the_shipped_chains_list_every_file_and_load(folder):
 def test_the_deployed_plant_is_what_configs_plant_builds():
     """models/plant's NSS carries exactly configs/plant/nss.yaml's config, and its chain the
     selection and co-tuning of configs/plant/ (the recipe the README rebuilds it with)."""
-    from parknss.actuators.config import load_actuator_config
+    from parknss.actuators.config import ArchConfig, load_actuator_config
     from parknss.nss.checkpoint import load_model
     from parknss.nss.config import load_nss_config
 
@@ -65,6 +65,9 @@ def test_the_deployed_plant_is_what_configs_plant_builds():
     cotune = load_actuator_config(recipe / "actuators.yaml").cotune
     assert (build["cotune"]["target"], build["cotune"]["iters"]) == (cotune.target, cotune.iters)
     assert build["deployed"]["brake"] == f"{cotune.target}+cotuned"
+    stored = json.loads((SHIPPED_PLANT / META).read_text())["channels"]["brake"]["arch"]
+    arch = load_actuator_config(recipe / "actuators.yaml").arch  # the hold-speed ceiling too
+    assert ArchConfig.model_validate(stored) == arch
 
 
 def test_an_edited_nss_normaliser_is_refused(chain):
