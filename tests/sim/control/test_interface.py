@@ -187,6 +187,18 @@ def test_bad_requests_and_configs_are_one_line_errors(tmp_path):
         load_interface_config(bad)
 
 
+def test_paper_chain_gains_differ_from_the_plants_in_the_retuned_gains_only():
+    """The paper chain's gains stay shipped beside the deployed plant's (its closed-loop
+    numbers were measured with them): the two files differ in the two gains the retuning
+    on the deployed plant moved, and the shipped ones are the plant's."""
+    paper = load_interface_config(CONFIG_DIR / "interface_paper_chain.yaml")
+    plant = load_interface_config()
+    assert (paper.hold_decel_ms2, paper.hold_ramp_ms3) == (0.42, 1.3)
+    assert (plant.hold_decel_ms2, plant.hold_ramp_ms3) == (0.546, 0.91)
+    moved = {k for k, v in paper.model_dump().items() if getattr(plant, k) != v}
+    assert moved == {"hold_decel_ms2", "hold_ramp_ms3"}
+
+
 class BlindZoneCar:
     """Rolling back into the wheel-speed blind zone (issue 17, TPCAP case 13, chain plant):
     the bus reads vx = 0 below 0.139 m/s while the car still rolls; the brake bites only
