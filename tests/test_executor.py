@@ -164,3 +164,108 @@ def test_an_interrupt_behind_a_failed_pool_abort_stops_as_interrupted(monkeypatc
     monkeypatch.setattr(joblib, "Parallel", FailingPool)
     with pytest.raises(RuntimeError, match="a worker broke"):
         run_jobs(jobs, workers=2, progress=False)
+
+
+def _wait_for(cond, timeout_s=120.0):
+    import time
+
+    end = time.monotonic() + timeout_s
+    while not cond():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.05)
+
+
+def test_prefetch_fills_the_cache_that_run_jobs_reads(tmp_path):
+    """Jobs computed in background processes are the cache's: a later run_jobs reads every
+    one of them and returns what an in-process run computes."""
+    from parknss.executor import Prefetch
+
+    jobs = _jobs(3)
+    with Prefetch(jobs, tmp_path, workers=2) as pre:
+        _wait_for(lambda: pre.computed == 3)
+    assert pre.computed == 3
+    tally = Tally()
+    got = run_jobs(jobs, workers=1, cache_dir=tmp_path, progress=False, tally=tally)
+    assert tally.to_json() == {"cache": 3, "store": 0, "computed": 0}
+    assert got == run_jobs(jobs, workers=1, progress=False)
+
+
+def test_prefetch_stopped_early_leaves_the_rest_to_run_jobs(tmp_path):
+    from parknss.executor import Prefetch
+
+    jobs = _jobs(4)
+    with Prefetch(jobs, tmp_path, workers=1) as pre:
+        pass  # stop at once: the one process finishes at most the job it holds
+    assert pre.computed <= 1
+    assert len(list(tmp_path.glob("*.json"))) == pre.computed
+    tally = Tally()
+    got = run_jobs(jobs, workers=1, cache_dir=tmp_path, progress=False, tally=tally)
+    assert tally.cache == pre.computed and tally.computed == 4 - pre.computed
+    assert got == run_jobs(jobs, workers=1, progress=False)
+
+
+def test_prefetch_skips_cached_jobs_and_leaves_failures_to_the_caller(tmp_path):
+    from parknss.executor import Prefetch
+
+    good = _jobs(2)
+    run_jobs(good[:1], workers=1, cache_dir=tmp_path, progress=False)
+    bad = Job(PROBE, {"seed": 0, "steps": "many"}, name="bad")
+    with Prefetch([good[0], bad, good[1]], tmp_path, workers=1) as pre:
+        _wait_for(lambda: ResultCache(tmp_path).get(good[1])[0])
+    assert pre.computed == 1  # good[1]: good[0] was cached, bad failed
+    assert not ResultCache(tmp_path).get(bad)[0]
+    with pytest.raises(TypeError):
+        run_jobs([bad], workers=1, cache_dir=tmp_path, progress=False)
+
+
+def test_prefetch_left_by_an_interrupt_kills_its_processes_at_once(tmp_path):
+    import multiprocessing
+    import time
+
+    from parknss.executor import Prefetch
+
+    jobs = [Job(PROBE, {"seed": s, "steps": 200_000}, name=f"s{s}") for s in range(2)]
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt), Prefetch(jobs, tmp_path, workers=2) as pre:
+        _wait_for(lambda: len(pre._procs) == 2 and all(p.is_alive() for p in pre._procs))
+        raise KeyboardInterrupt
+    assert time.monotonic() - t0 < 30
+    assert not [p for p in multiprocessing.active_children() if p.is_alive()]
+    assert pre.computed == 0 and not list(tmp_path.glob("*.json"))
+
+
+def test_prefetch_of_a_killed_caller_stops_after_the_job_it_holds(tmp_path):
+    """SIGKILL of the caller: its background processes notice the lost parent between jobs
+    and exit, instead of fitting the rest of the list for nobody."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    script = f"""
+import os, signal, sys, time
+from parknss.executor import Job, Prefetch
+jobs = [Job({PROBE!r}, {{"seed": s, "steps": 400}}, name=str(s)) for s in range(400)]
+pre = Prefetch(jobs, {str(tmp_path)!r}, workers=2).__enter__()
+while pre.computed < 2:
+    time.sleep(0.02)
+print(" ".join(str(p.pid) for p in pre._procs), flush=True)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert proc.returncode == -9
+    pids = [int(p) for p in proc.stdout.split()]
+    assert len(pids) == 2
+
+    def running(pid):
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+        except FileNotFoundError:
+            return False
+
+    _wait_for(lambda: not any(running(p) for p in pids), timeout_s=30)
+    n = len(list(tmp_path.glob("*.json")))
+    time.sleep(0.5)
+    assert len(list(tmp_path.glob("*.json"))) == n < 400

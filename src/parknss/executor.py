@@ -13,6 +13,10 @@ methods (the experiments' result store in the repository, :mod:`parknss.experime
 A job is read from the cache, else from the store, else computed; a computed result is
 written to both (with the wall and CPU time its worker spent).
 A :class:`Tally` counts where the results came from.
+
+:class:`Prefetch` computes jobs into such a cache in background processes while the
+caller does other work (``parknss identify`` fits the actuator study's Phase A beside the
+NSS fit); the later :func:`run_jobs` with the same cache finds them done.
 """
 
 from __future__ import annotations
@@ -311,3 +315,102 @@ def _run_ray(
     finally:
         if started:
             ray.shutdown()
+
+
+class Prefetch:
+    """Compute ``jobs`` into the :class:`ResultCache` at ``cache_dir`` in ``workers``
+    background processes while the caller does other work (a context manager).
+
+    The processes are spawned (a fresh interpreter each, one torch thread, SIGINT ignored:
+    the caller decides when they stop) and take the jobs in the order given from a shared
+    counter, skipping those the cache already holds. :meth:`stop` asks them to stop and
+    waits for each to finish and cache the job it holds, so no fit is thrown away (at most
+    ``timeout_s``, then they are killed); leaving the ``with`` block by an exception (an
+    interrupt, SIGTERM) kills them at once, and a caller killed outright (SIGKILL) leaves
+    none running past the job it holds. A job that fails in the background is left
+    out of the cache: the caller's :func:`run_jobs` computes it again and raises its error
+    in the caller's process. Results are the cache's, so a job gives the same result
+    wherever it ran (jobs must be deterministic in their arguments, as every parknss job
+    is)."""
+
+    def __init__(self, jobs: Sequence[Job], cache_dir: str | Path, workers: int = 1) -> None:
+        if workers < 1:
+            raise ConfigError(f"prefetch workers must be >= 1, got {workers}")
+        self.jobs = list(jobs)
+        self.cache_dir = Path(cache_dir)
+        self.workers = workers
+        self._procs: list[Any] = []
+        self._stop: Any = None
+        self._next: Any = None
+        self._done: Any = None
+
+    def __enter__(self) -> Prefetch:
+        import multiprocessing
+
+        ResultCache(self.cache_dir)  # create the folder here, not racing in the workers
+        ctx = multiprocessing.get_context("spawn")
+        self._stop, self._next, self._done = ctx.Event(), ctx.Value("i", 0), ctx.Value("i", 0)
+        docs = [{"fn": j.fn, "kwargs": j.kwargs, "name": j.name} for j in self.jobs]
+        for _ in range(min(self.workers, len(self.jobs))):
+            proc = ctx.Process(target=_prefetch_worker, daemon=True,
+                               args=(docs, str(self.cache_dir), self._next, self._done,
+                                     self._stop))
+            proc.start()
+            self._procs.append(proc)
+        return self
+
+    @property
+    def computed(self) -> int:
+        """Jobs the background processes have computed and cached so far."""
+        return 0 if self._done is None else int(self._done.value)
+
+    def stop(self, timeout_s: float = 600.0) -> int:
+        """Let each process finish its job, then stop; returns :attr:`computed`."""
+        if self._stop is not None:
+            self._stop.set()
+        deadline = time.monotonic() + timeout_s
+        for proc in self._procs:
+            proc.join(max(0.0, deadline - time.monotonic()))
+        self._kill()
+        return self.computed
+
+    def _kill(self) -> None:
+        for proc in self._procs:
+            if proc.is_alive():
+                proc.kill()
+            proc.join(5.0)
+        self._procs = []
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.stop()
+        else:
+            if self._stop is not None:
+                self._stop.set()
+            self._kill()
+
+
+def _prefetch_worker(docs: list[dict], cache_dir: str, next_job, done, stop) -> None:
+    """One :class:`Prefetch` process: take the next job, compute it unless cached, cache
+    it; until the jobs run out or the caller says stop."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+    cache = ResultCache(cache_dir)
+    while not stop.is_set() and os.getppid() == parent:  # a killed caller orphans no work
+        with next_job.get_lock():
+            i = next_job.value
+            next_job.value += 1
+        if i >= len(docs):
+            return
+        job = Job(**docs[i])
+        if cache.get(job)[0]:
+            continue
+        try:
+            result = execute(job)
+        except Exception:  # left to the caller's run_jobs, which raises it there
+            continue
+        cache.put(job, result)
+        with done.get_lock():
+            done.value += 1

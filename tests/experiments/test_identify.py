@@ -85,6 +85,58 @@ def test_pipeline_writes_the_chain_and_the_card(car):
     assert "<script" not in page and "http" not in page.replace("http-equiv", "")
 
 
+@pytest.mark.slow
+def test_phase_a_fitted_beside_the_nss_gives_the_same_chain(env, car, tmp_path, monkeypatch):
+    """With --workers 2 the actuator study's Phase A runs in a background process while the
+    NSS fits (here the fit waits until two Phase A fits are cached, so the overlap is
+    certain); the selection and the chain equal the one-worker run's bit for bit."""
+    import time
+
+    from parknss.experiments import training
+
+    out = tmp_path / "car"
+    real = training.train_deployment
+
+    def after_two_phase_a_fits(inputs):
+        end = time.monotonic() + 180
+        while len(list((out / "phase_a").glob("*/*.json"))) < 2:
+            assert time.monotonic() < end, "no Phase A fit ahead"
+            time.sleep(0.05)
+        return real(inputs)
+
+    monkeypatch.setattr(training, "train_deployment", after_two_phase_a_fits)
+    said: list[str] = []
+    doc = run_identify(_inputs(env, out, workers=2), said.append)
+    assert doc["stages"]["selection"]["action"] == "ran"
+    done = [m for m in said if "fits done beside the NSS fit" in m]
+    assert len(done) == 1 and int(done[0].split("Phase A ahead: ")[1].split()[0]) >= 2
+    sel = json.loads((out / "selection" / "study.json").read_text())
+    ref = json.loads((car / "selection" / "study.json").read_text())
+    def scores(doc):
+        return [{k: v for k, v in r.items() if k != "fit_s"} for r in doc["phase_a"]]
+
+    assert sel["winners"] == ref["winners"] and scores(sel) == scores(ref)
+    assert len(list((out / "phase_a").glob("*/*.json"))) == len(ref["phase_a"])
+    for name in ("chain/actuators.safetensors", "nss/model/model.safetensors"):
+        assert (out / name).read_bytes() == (car / name).read_bytes()
+
+
+@pytest.mark.parametrize("change", [{"workers": 1}, {"executor": "ray"},
+                                    {"selection": "sel.json"},
+                                    {"stages": ("data", "nss")},
+                                    {"overrides": {"phase_a_ahead": False}}])
+def test_phase_a_runs_ahead_only_when_it_can_help(env, tmp_path, change):
+    import contextlib
+    import dataclasses
+
+    from parknss.experiments.identify.config import load_identify_config
+
+    inputs = dataclasses.replace(_inputs(env, tmp_path / "car", workers=2), **change)
+    pipe = pipeline_mod.Pipeline(inputs, load_identify_config(None, **inputs.overrides),
+                                 lambda m: None)
+    assert isinstance(pipe.phase_a_ahead(), contextlib.nullcontext)
+
+
 def test_rerun_skips_finished_stages(env, car, capsys):
     before = {p.name: p.stat().st_mtime_ns for p in (car / "stages").iterdir()}
     assert main(_args(env, car, "--json")) == 0

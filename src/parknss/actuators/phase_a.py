@@ -42,11 +42,16 @@ def _quiet(msg: str) -> None:
 @dataclass(frozen=True)
 class Fanout:
     """How independent fits run (:func:`parknss.executor.run_jobs`): ``executor`` "local"
-    or "ray", ``workers`` (1: in-process), Ray ``address`` (None: a local Ray)."""
+    or "ray", ``workers`` (1: in-process), Ray ``address`` (None: a local Ray);
+    ``cache_dir`` a folder of finished fits (:class:`parknss.executor.ResultCache`, keyed
+    by each job's arguments) read before fitting and written after, or None. The caller
+    owns the cache's validity: its key names the campaign folder, not its content
+    (``parknss identify`` keeps one per campaign data hash)."""
 
     executor: str = "local"
     workers: int | None = 1
     address: str | None = None
+    cache_dir: str | None = None
 
 
 @dataclass
@@ -138,6 +143,20 @@ def fit_job(
     return encode_candidate(model, rep, score)
 
 
+def phase_a_jobs(
+    specs: Sequence[CandidateSpec],
+    data: str | None,
+    train: Sequence[str],
+    val: Sequence[str],
+    cfg: ActuatorConfig,
+    env: Envelope,
+) -> list[Job]:
+    """The executor jobs of :func:`phase_a` (one :func:`fit_job` per spec), all JSON."""
+    common = {"data": data, "train": list(train), "val": list(val),
+              "config": cfg.model_dump(mode="json"), "envelope": env.to_json()}
+    return [Job(FIT_JOB, {"spec": s.name, **common}, name=s.name) for s in specs]
+
+
 def phase_a(
     specs: Sequence[CandidateSpec],
     data: str | None,
@@ -150,11 +169,10 @@ def phase_a(
 ) -> list[Candidate]:
     """Fit every spec on the trials ``train`` and score it on ``val`` (trial ids of the
     campaign folder ``data``), through the executor (see the module doc)."""
-    common = {"data": data, "train": list(train), "val": list(val),
-              "config": cfg.model_dump(mode="json"), "envelope": env.to_json()}
-    jobs = [Job(FIT_JOB, {"spec": s.name, **common}, name=s.name) for s in specs]
+    jobs = phase_a_jobs(specs, data, train, val, cfg, env)
     docs = run_jobs(jobs, executor=fanout.executor, workers=fanout.workers,
-                    address=fanout.address, progress=False, desc="phase A")
+                    address=fanout.address, progress=False, desc="phase A",
+                    cache_dir=fanout.cache_dir)
     out = []
     for i, doc in enumerate(docs):
         c = decode_candidate(doc, cfg)

@@ -32,13 +32,21 @@ from parknss.actuators.config import ActuatorConfig
 from parknss.actuators.envelopes import Envelope, identify_envelope
 from parknss.actuators.fit import fit_candidate, signal_score
 from parknss.actuators.models import ActuatorModel
-from parknss.actuators.phase_a import Candidate, Fanout, phase_a, shortlist, study_specs
-from parknss.actuators.spec import CHANNELS
+from parknss.actuators.phase_a import (
+    Candidate,
+    Fanout,
+    phase_a,
+    phase_a_jobs,
+    shortlist,
+    study_specs,
+)
+from parknss.actuators.spec import CHANNELS, CandidateSpec
 from parknss.chain.score import ChainScore, chain_score, make_chain
 from parknss.chain.trials import chain_predictions
 from parknss.data.splits import cv_plan
 from parknss.data.trial import Campaign, Trial
 from parknss.errors import ConfigError
+from parknss.executor import Job
 from parknss.nss.model import NSSModel
 
 Progress = Callable[[str], None]
@@ -170,6 +178,32 @@ def split(campaign: Campaign, cfg: ActuatorConfig) -> tuple[list[Trial], list[Tr
     return [campaign[i] for i in f.train], [campaign[i] for i in f.val]
 
 
+@dataclass(frozen=True)
+class PhaseAPlan:
+    """What Phase A of :func:`run_selection` fits: the split, the envelope identified on
+    its training trials, the candidate specs and their executor jobs."""
+
+    train: list[Trial]
+    val: list[Trial]
+    env: Envelope
+    specs: list[CandidateSpec]
+    jobs: list[Job]
+
+
+def phase_a_plan(campaign: Campaign, data: str | None, cfg: ActuatorConfig) -> PhaseAPlan:
+    """Phase A of :func:`run_selection` on ``campaign`` (the folder ``data``), planned
+    but not fitted: it needs no NSS, so a caller may fit it ahead
+    (:class:`parknss.executor.Prefetch`; ``parknss identify`` does, beside the NSS fit)."""
+    train, val = split(campaign, cfg)
+    env = identify_envelope(train, cfg.envelope)
+    sc = cfg.select
+    if "cmd" not in sc.variants:
+        raise ConfigError("select.variants must include 'cmd' (Fig. 6 and co-tuning use it)")
+    specs = study_specs(sc.archs, sc.long_archs, sc.variants)
+    jobs = phase_a_jobs(specs, data, [t.id for t in train], [t.id for t in val], cfg, env)
+    return PhaseAPlan(train, val, env, specs, jobs)
+
+
 def run_selection(
     nss: NSSModel,
     campaign: Campaign,
@@ -183,12 +217,9 @@ def run_selection(
     ``campaign`` is the campaign folder ``data`` loaded (None: the default campaign); the
     Phase A fits run as executor jobs on that folder (``fanout``)."""
     t0 = time.perf_counter()
-    train, val = split(campaign, cfg)
-    env = identify_envelope(train, cfg.envelope)
+    plan = phase_a_plan(campaign, data, cfg)
+    train, val, env, specs = plan.train, plan.val, plan.env, plan.specs
     sc = cfg.select
-    if "cmd" not in sc.variants:
-        raise ConfigError("select.variants must include 'cmd' (Fig. 6 and co-tuning use it)")
-    specs = study_specs(sc.archs, sc.long_archs, sc.variants)
     cands = phase_a(specs, data, [t.id for t in train], [t.id for t in val], cfg, env,
                     progress, fanout)
     short = shortlist(cands, cfg.select.shortlist)

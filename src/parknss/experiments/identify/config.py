@@ -43,6 +43,7 @@ class IdentifyConfig(StrictModel):
     tune_rounds: int = Field(1, ge=1)
     fidelity_grid: Literal["36", "12", "252"] = "12"
     fidelity_cells: str | None = "2,8,14,20"
+    phase_a_ahead: bool = True
     estimate_s: StageEstimates = StageEstimates()
 
 

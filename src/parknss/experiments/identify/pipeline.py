@@ -27,10 +27,18 @@ fidelity the chain against the truth on a small grid, where a truth exists    fi
 export   the FMU and the ONNX step (:mod:`parknss.export`)                   export/
 card     the model card (:mod:`.card`)                                        model_card.*
 ======== ================================================================== ==================
+
+The actuator study's Phase A needs no NSS: with ``--workers N`` (N >= 2, local executor)
+its fits run in N - 1 background processes while the NSS fits (:meth:`Pipeline.
+phase_a_ahead`, ``phase_a_ahead`` in configs/identify.yaml), into the cache
+``phase_a/<data hash>/`` that the selection stage reads, fit by fit (which also resumes
+an interrupted study's Phase A). The fits seed themselves from their names, so the
+selection is the same whichever process fitted them.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import shutil
 from collections.abc import Callable
@@ -139,6 +147,30 @@ class Pipeline:
         write_text_atomic(path, text + yaml.safe_dump(doc, sort_keys=False))
         return SimConfigFiles(closed_loop=str(path), interface=interface)
 
+    def phase_a_cache(self) -> Path:
+        """The Phase A fits of this campaign (one folder per data hash: the executor's
+        cache keys name the campaign folder, not its content)."""
+        return self.car / "phase_a" / self.rec["data"].product["facts"]["data_hash"][:16]
+
+    def phase_a_ahead(self):
+        """While the NSS fits: the actuator study's Phase A (which needs no NSS) fitted in
+        ``workers - 1`` background processes into :meth:`phase_a_cache`, when this run
+        will run the study itself with a local pool of 2 or more workers
+        (``phase_a_ahead`` in configs/identify.yaml); else nothing."""
+        inp = self.inp
+        if not (self.cfg.phase_a_ahead and inp.selection is None and inp.executor == "local"
+                and inp.workers >= 2 and "selection" in wanted_stages(inp)):
+            return contextlib.nullcontext()
+        from parknss.actuators.config import load_actuator_config
+        from parknss.chain.selection import phase_a_plan
+        from parknss.executor import Prefetch
+
+        plan = phase_a_plan(self.campaign, str(self.campaign_dir()),
+                            load_actuator_config(inp.actuator_config))
+        self.say(f"  [actuators] Phase A ahead: {len(plan.jobs)} fits in {inp.workers - 1} "
+                 "background process(es) beside the NSS fit")
+        return _Ahead(Prefetch(plan.jobs, self.phase_a_cache(), inp.workers - 1), self.say)
+
     def plants(self) -> list[str]:
         return ["kinematic", "chain", *(["reference"] if self.truth else [])]
 
@@ -220,9 +252,10 @@ class Pipeline:
                                      "recipe": self.recipe, "config": wanted},
                                     reused=check.reason)
             resume = not fresh and train_state.exists(out / "state")
-            doc, text = train_deployment(TrainInputs(
-                out=out, data=self.campaign_dir(), overrides=_overrides(cfg, self.inp),
-                resume=resume, overwrite=True))
+            with self.phase_a_ahead():
+                doc, text = train_deployment(TrainInputs(
+                    out=out, data=self.campaign_dir(), overrides=_overrides(cfg, self.inp),
+                    resume=resume, overwrite=True))
             self.say(text)
             return StageOutcome({"model": doc["model"], "code": "current",
                                  "fitted_code_version": code_version(),
@@ -261,7 +294,8 @@ class Pipeline:
             doc = run_actuator_study(StudyInputs(
                 out=out, nss=self.model_dir(), data=self.campaign_dir(),
                 config=self.inp.actuator_config, overwrite=fresh,
-                fanout=Fanout(self.inp.executor, self.inp.workers, self.inp.address)),
+                fanout=Fanout(self.inp.executor, self.inp.workers, self.inp.address,
+                              cache_dir=str(self.phase_a_cache()))),
                 lambda m: self.say(f"  [actuators] {m}"))
             return StageOutcome({"selection": str(out / "selection.json"),
                                  "winners": doc["winners"],
@@ -420,6 +454,23 @@ class Pipeline:
             return StageOutcome({"json": str(js), "html": str(page)})
 
         return self.book.run("card", inputs, body)
+
+
+class _Ahead:
+    """A :class:`~parknss.executor.Prefetch` that says how far it got when it stops."""
+
+    def __init__(self, prefetch, say: Say) -> None:
+        self.prefetch, self.say = prefetch, say
+
+    def __enter__(self):
+        self.prefetch.__enter__()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.prefetch.__exit__(exc_type, exc, tb)
+        if exc_type is None:
+            self.say(f"  [actuators] Phase A ahead: {self.prefetch.computed} of "
+                     f"{len(self.prefetch.jobs)} fits done beside the NSS fit")
 
 
 def _json(doc) -> str:
