@@ -34,6 +34,16 @@ def test_cache_resumes_without_recomputing(tmp_path):
     assert ResultCache(tmp_path).get(jobs[2])[0]
 
 
+def test_cache_hits_a_job_whose_arguments_hold_tuples(tmp_path):
+    """The cache file holds the arguments as JSON (tuples become lists): the job that wrote
+    it must still find it (an actuator envelope's bounds are tuples)."""
+    job = Job(PROBE, {"seed": 1, "steps": 20, "n": 64}, name="t")
+    tupled = Job(PROBE, {"seed": 1, "steps": 20, "n": 64, "unused": (1.5, -2.0)}, name="t")
+    ResultCache(tmp_path).put(tupled, {"a": 1.0})
+    assert ResultCache(tmp_path).get(tupled) == (True, {"a": 1.0})
+    assert not ResultCache(tmp_path).get(job)[0]
+
+
 def test_torn_cache_file_is_recomputed(tmp_path):
     job = _jobs(1)[0]
     (tmp_path / f"{job.key()}.json").write_text('{"fn": "x", "res')

@@ -137,7 +137,8 @@ class ResultCache:
             doc = json.loads(p.read_text())
         except json.JSONDecodeError:
             return False, None  # a torn write from a killed run: recompute
-        if doc.get("fn") != job.fn or doc.get("kwargs") != job.kwargs:
+        # compared as JSON, as the key is: a tuple argument is cached as a list
+        if doc.get("fn") != job.fn or doc.get("kwargs") != json.loads(json.dumps(job.kwargs)):
             return False, None
         return True, doc["result"]
 

@@ -117,6 +117,18 @@ def test_phase_a_fitted_beside_the_nss_gives_the_same_chain(env, car, tmp_path, 
 
     assert sel["winners"] == ref["winners"] and scores(sel) == scores(ref)
     assert len(list((out / "phase_a").glob("*/*.json"))) == len(ref["phase_a"])
+    # the selection stage read them: every Phase A job of this campaign is a cache hit
+    from parknss.actuators.config import load_actuator_config
+    from parknss.chain.selection import phase_a_plan
+    from parknss.data.io import read_campaign
+    from parknss.executor import Tally, run_jobs
+
+    data = str((env / "data").resolve())
+    plan = phase_a_plan(read_campaign(data), data, load_actuator_config(env / "act.yaml"))
+    tally = Tally()
+    (cache,) = (out / "phase_a").iterdir()
+    run_jobs(plan.jobs, workers=1, cache_dir=cache, progress=False, tally=tally)
+    assert tally.to_json() == {"cache": len(plan.jobs), "store": 0, "computed": 0}
     for name in ("chain/actuators.safetensors", "nss/model/model.safetensors"):
         assert (out / name).read_bytes() == (car / name).read_bytes()
 
