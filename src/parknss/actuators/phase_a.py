@@ -169,14 +169,22 @@ def phase_a(
 ) -> list[Candidate]:
     """Fit every spec on the trials ``train`` and score it on ``val`` (trial ids of the
     campaign folder ``data``), through the executor (see the module doc)."""
-    jobs = phase_a_jobs(specs, data, train, val, cfg, env)
+    return run_phase_a(phase_a_jobs(specs, data, train, val, cfg, env), cfg, progress, fanout)
+
+
+def run_phase_a(
+    jobs: Sequence[Job], cfg: ActuatorConfig, progress: Progress = _quiet,
+    fanout: Fanout = Fanout(),
+) -> list[Candidate]:
+    """The candidates of the :func:`phase_a_jobs` ``jobs``, fitted through the executor
+    (or read from ``fanout.cache_dir``), in the order of ``jobs``."""
     docs = run_jobs(jobs, executor=fanout.executor, workers=fanout.workers,
                     address=fanout.address, progress=False, desc="phase A",
                     cache_dir=fanout.cache_dir)
     out = []
     for i, doc in enumerate(docs):
         c = decode_candidate(doc, cfg)
-        progress(f"A {i + 1}/{len(specs)} {c.spec.name}: held-out MSE {c.score.mse:.4g} "
+        progress(f"A {i + 1}/{len(jobs)} {c.spec.name}: held-out MSE {c.score.mse:.4g} "
                  f"({c.fit.wall_s:.1f} s)")
         out.append(c)
     return out

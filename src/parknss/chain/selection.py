@@ -35,8 +35,8 @@ from parknss.actuators.models import ActuatorModel
 from parknss.actuators.phase_a import (
     Candidate,
     Fanout,
-    phase_a,
     phase_a_jobs,
+    run_phase_a,
     shortlist,
     study_specs,
 )
@@ -218,10 +218,9 @@ def run_selection(
     Phase A fits run as executor jobs on that folder (``fanout``)."""
     t0 = time.perf_counter()
     plan = phase_a_plan(campaign, data, cfg)
-    train, val, env, specs = plan.train, plan.val, plan.env, plan.specs
+    train, val, env = plan.train, plan.val, plan.env
     sc = cfg.select
-    cands = phase_a(specs, data, [t.id for t in train], [t.id for t in val], cfg, env,
-                    progress, fanout)
+    cands = run_phase_a(plan.jobs, cfg, progress, fanout)
     short = shortlist(cands, cfg.select.shortlist)
     by_name = {c.label: c for c in cands}
     pool: dict[str, Candidate] = {c.label: c for cs in short.values() for c in cs}
