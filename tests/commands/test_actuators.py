@@ -98,7 +98,7 @@ def test_phase_a_through_a_process_pool_equals_in_process(env, actuator_config):
     """The study's Phase A fits are executor jobs: a 2-worker pool gives the very models
     and scores the in-process run gives (each fit seeds itself from its name)."""
     from parknss.actuators.envelopes import identify_envelope
-    from parknss.actuators.phase_a import Fanout, phase_a
+    from parknss.actuators.phase_a import Fanout, phase_a_jobs, run_phase_a
     from parknss.actuators.spec import CandidateSpec
     from parknss.data.io import read_campaign
 
@@ -108,8 +108,8 @@ def test_phase_a_through_a_process_pool_equals_in_process(env, actuator_config):
     envl = identify_envelope([t for t in camp if t.id in train], cfg.envelope)
     specs = [CandidateSpec.parse(n) for n in ("drive/narx/uniform", "brake/gru/cmd")]
     args = (specs, str(env / "data"), train, val, cfg, envl)
-    one = phase_a(*args, fanout=Fanout(workers=1))
-    two = phase_a(*args, fanout=Fanout(workers=2))
+    one = run_phase_a(phase_a_jobs(*args), cfg, fanout=Fanout(workers=1))
+    two = run_phase_a(phase_a_jobs(*args), cfg, fanout=Fanout(workers=2))
     for a, b in zip(one, two, strict=True):
         assert a.label == b.label and a.score.mse == b.score.mse
         for k, v in a.model.state_dict().items():

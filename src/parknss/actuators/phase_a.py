@@ -5,7 +5,7 @@ trials and scored against the recorded actual on the held-out trials (MSE, MAE, 
 response); :func:`shortlist` keeps the best ``select.shortlist`` per channel by held-out
 MSE. Phase B, which needs the chain, is :mod:`parknss.chain.selection`.
 
-The fits are independent, so :func:`phase_a` runs them as jobs of the one executor
+The fits are independent, so :func:`run_phase_a` runs them as jobs of the one executor
 (:func:`parknss.executor.run_jobs`: in-process with one worker, a local process pool, or
 Ray). A job (:func:`fit_job`) names its campaign folder, its split by trial id, the
 actuator config and the envelope, all JSON; it returns the fitted weights, the scaling, the
@@ -151,25 +151,11 @@ def phase_a_jobs(
     cfg: ActuatorConfig,
     env: Envelope,
 ) -> list[Job]:
-    """The executor jobs of :func:`phase_a` (one :func:`fit_job` per spec), all JSON."""
+    """The executor jobs of Phase A: one :func:`fit_job` per spec, fitted on the trials
+    ``train`` and scored on ``val`` (trial ids of the campaign folder ``data``), all JSON."""
     common = {"data": data, "train": list(train), "val": list(val),
               "config": cfg.model_dump(mode="json"), "envelope": env.to_json()}
     return [Job(FIT_JOB, {"spec": s.name, **common}, name=s.name) for s in specs]
-
-
-def phase_a(
-    specs: Sequence[CandidateSpec],
-    data: str | None,
-    train: Sequence[str],
-    val: Sequence[str],
-    cfg: ActuatorConfig,
-    env: Envelope,
-    progress: Progress = _quiet,
-    fanout: Fanout = Fanout(),
-) -> list[Candidate]:
-    """Fit every spec on the trials ``train`` and score it on ``val`` (trial ids of the
-    campaign folder ``data``), through the executor (see the module doc)."""
-    return run_phase_a(phase_a_jobs(specs, data, train, val, cfg, env), cfg, progress, fanout)
 
 
 def run_phase_a(
