@@ -29,7 +29,8 @@ from bench_train import load_campaign, paper_batch
 
 from parknss.nss.config import NSSConfig, with_overrides
 from parknss.nss.fused import KERNELS
-from parknss.nss.train import build_model, epoch_loss, geometry_of
+from parknss.nss.step import epoch_loss
+from parknss.nss.train import build_model, geometry_of
 
 CHANNELS = ("vx_mse_moving_kmh2", "yaw_mse_moving_degs2", "ax_mse_moving_ms2",
             "ay_mse_moving_ms2")

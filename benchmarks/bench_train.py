@@ -50,7 +50,8 @@ from parknss.data.windows import make_windows
 from parknss.nss.batch import Batch, make_batch
 from parknss.nss.config import NSSConfig, with_overrides
 from parknss.nss.model import NORMALIZED
-from parknss.nss.train import build_model, epoch_loss, geometry_of
+from parknss.nss.step import epoch_loss
+from parknss.nss.train import build_model, geometry_of
 
 
 def load_campaign(data: str | None):

@@ -136,13 +136,20 @@ def test_phase_a_fitted_beside_the_nss_gives_the_same_chain(env, car, tmp_path, 
 @pytest.mark.parametrize("change", [{"workers": 1}, {"executor": "ray"},
                                     {"selection": "sel.json"},
                                     {"stages": ("data", "nss")},
-                                    {"overrides": {"phase_a_ahead": False}}])
+                                    {"overrides": {"phase_a_ahead": False}},
+                                    {"nss_set": ["train.processes=2"]}])
 def test_phase_a_runs_ahead_only_when_it_can_help(env, tmp_path, change):
+    """Not for one worker, ray, given winners, no selection stage, turned off, or when the
+    NSS fit takes every worker (data-parallel over 2 processes of 2 workers)."""
     import contextlib
     import dataclasses
 
     from parknss.experiments.identify.config import load_identify_config
+    from parknss.nss.config import cli_overrides
 
+    change = dict(change)
+    if "nss_set" in change:
+        change = {"nss_overrides": cli_overrides([*NSS_SET, *change.pop("nss_set")])}
     inputs = dataclasses.replace(_inputs(env, tmp_path / "car", workers=2), **change)
     pipe = pipeline_mod.Pipeline(inputs, load_identify_config(None, **inputs.overrides),
                                  lambda m: None)

@@ -338,7 +338,7 @@ def test_torque_gain_prior_hand_computed():
 def test_torque_gain_prior_is_off_by_default_and_trains_the_gain_up():
     """Off (the default): the loss has no torque term and the fit identity is unchanged.
     On: gradient steps on the prior alone raise the state net's torque gain."""
-    from parknss.nss.train import epoch_loss
+    from parknss.nss.step import epoch_loss
 
     m, cfg, b = _gain_batch()
     terms = epoch_loss(m, b, cfg)
@@ -460,7 +460,7 @@ def test_decoupling_prior_penalises_the_yaw_state_as_a_hidden_speed_regulator():
     doc = fit_identity(NSSConfig(loss=lc))["loss"]
     assert doc["lambda_decouple"] == 1.0 and doc["decouple_tolerance_ms2"] == 0.05
     assert doc["torque_prior_samples"] == 500
-    from parknss.nss.train import epoch_loss
+    from parknss.nss.step import epoch_loss
 
     del m.derivative
     on = cfg.model_copy(update={"loss": lc})

@@ -45,7 +45,8 @@ from parknss.nss.batch import make_batch
 from parknss.nss.checkpoint import LoadedModel
 from parknss.nss.model import NORMALIZED, NSSModel
 from parknss.nss.predict import predict_trials
-from parknss.nss.train import build_model, epoch_loss
+from parknss.nss.step import epoch_loss
+from parknss.nss.train import build_model
 
 Progress = Callable[[str], None]
 

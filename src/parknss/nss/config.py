@@ -127,6 +127,9 @@ class DataConfig(StrictModel):
 class TrainConfig(StrictModel):
     """Optimisation (§IV-B): Adam, cosine LR from 2e-3, cap 3200 epochs, best checkpoint."""
 
+    # added after fits and run folders were stored: their keys stay as before
+    omit_at_default = frozenset({"processes"})
+
     recipe: Literal["paper", "fast"] = Field(
         "paper",
         description="paper: full-batch BPTT over the end-aligned windows for `epochs`; fast: "
@@ -138,6 +141,10 @@ class TrainConfig(StrictModel):
     schedule: Literal["cosine", "constant"] = "cosine"
     seed: int = 0
     threads: int = Field(1, ge=1, description="torch intra-op threads during training")
+    processes: int = Field(
+        1, ge=1, le=64, description="processes sharing each step's windows (data-parallel, "
+        "nss/parallel.py): the same objective and Adam steps, rounded differently; 1: the "
+        "fit's own process only")
     val_every: int = Field(5, ge=1, description="validate every N epochs")
     smooth_window: int = Field(
         20, ge=1, description="trailing moving average over this many criterion points"

@@ -46,6 +46,12 @@
 The data-loss shape is MAE (the paper's), MSE or log-cosh; the physics terms are defined
 with max and |.| by eqs. 6-7 and keep that form. "valid" masks padding (windows shorter
 than the batch length); every mean is over valid samples only.
+
+A batch split over processes (data-parallel training, :mod:`parknss.nss.parallel`) gives
+each shard a :class:`Share`: the whole batch's sample counts, so that every masked mean of a
+shard is its masked *sum* over the whole batch's count, and the data-independent terms
+(the envelope priors) are computed by the first shard only. The shards' losses then add
+up to the whole batch's loss, and their gradients to its gradient (up to rounding).
 """
 
 from __future__ import annotations
@@ -75,9 +81,12 @@ def pointwise(e: Tensor, kind: str) -> Tensor:
     raise ValueError(f"unknown loss kind {kind!r}")
 
 
-def masked_mean(v: Tensor, mask: Tensor) -> Tensor:
-    """Σ v·mask / Σ mask (0 when the mask is empty)."""
-    return (v * mask).sum() / mask.sum().clamp(min=1.0)
+def masked_mean(v: Tensor, mask: Tensor, count: float | None = None) -> Tensor:
+    """Σ v·mask / Σ mask (0 when the mask is empty); with ``count``, Σ v·mask / count (a
+    shard's part of the mean over a whole batch whose mask sums to ``count``)."""
+    if count is None:
+        return (v * mask).sum() / mask.sum().clamp(min=1.0)
+    return (v * mask).sum() / max(count, 1.0)
 
 
 @dataclass
@@ -96,6 +105,27 @@ class Targets:
     gear: Tensor
     valid: Tensor
     moving: Tensor
+
+
+@dataclass(frozen=True)
+class Share:
+    """One shard's part of a batch split over processes (module doc).
+
+    valid, moving, moving_in_gear: the whole batch's counts of valid samples, moving
+    samples, and moving samples with a drive gear engaged (the masks' sums, exact integers);
+    first: this shard also carries the data-independent terms (the envelope priors)."""
+
+    valid: float
+    moving: float
+    moving_in_gear: float
+    first: bool
+
+    @classmethod
+    def of(cls, t: Targets, first: bool) -> Share:
+        """The counts of the whole batch's targets ``t``."""
+        in_gear = (t.gear != 0).to(t.moving.dtype)
+        return cls(float(t.valid.sum()), float(t.moving.sum()),
+                   float((t.moving * in_gear).sum()), first)
 
 
 @dataclass
@@ -149,42 +179,54 @@ def state_loss(
     kind: str,
     moving_yaw: bool = False,
     blind: BlindZoneObservation | None = None,
+    share: Share | None = None,
 ) -> Tensor:
     """Masked state loss: vx on the moving region, ω̂_z on all valid (or moving) samples.
 
     With ``blind`` the blind-zone samples (valid, not moving) enter the vx part too: the
-    predicted reading :meth:`BlindZoneObservation.reading_s` against the sensor's 0."""
+    predicted reading :meth:`BlindZoneObservation.reading_s` against the sensor's 0.
+    With ``share`` (training only, ``moving_yaw`` False) the sum is over the whole batch's
+    count (module doc)."""
     ev = pointwise(r.vx_s - t.vx_s, kind)
     ew = pointwise(r.yaw_s - t.yaw_s, kind)
     mw = t.moving if moving_yaw else t.valid
+    if share is not None and moving_yaw:
+        raise ValueError("a shared state loss counts the yaw part over all valid samples")
     if blind is None:
-        num, den = (ev * t.moving).sum() + (ew * mw).sum(), t.moving.sum() + mw.sum()
-        return num / den.clamp(min=1.0)
+        num = (ev * t.moving).sum() + (ew * mw).sum()
+        if share is not None:
+            return num / max(share.moving + share.valid, 1.0)
+        return num / (t.moving.sum() + mw.sum()).clamp(min=1.0)
     mb = t.valid - t.moving
     eb = pointwise(blind.reading_s(r.vx_s), kind)
     num = (ev * t.moving).sum() + (eb * mb).sum() + (ew * mw).sum()
+    if share is not None:  # moving + blind-zone + valid samples = 2 · valid
+        return num / max(2.0 * share.valid, 1.0)
     return num / (t.moving.sum() + mb.sum() + mw.sum()).clamp(min=1.0)
 
 
-def output_loss(r: Rollout, t: Targets, kind: str) -> Tensor:
+def output_loss(r: Rollout, t: Targets, kind: str, share: Share | None = None) -> Tensor:
     """Output loss: mean over valid samples and both channels [ax, ay]."""
     e = pointwise(r.ax_s - t.ax_s, kind) + pointwise(r.ay_s - t.ay_s, kind)
-    return 0.5 * masked_mean(e, t.valid)
+    return 0.5 * masked_mean(e, t.valid, None if share is None else share.valid)
 
 
-def velocity_direction_loss(vx_s: Tensor, gear: Tensor, vx_zero_s, valid: Tensor) -> Tensor:
-    """Eq. 6: drive max(0,-v), reverse max(0,v), neutral/park |v|; v = vx_s - s(0)."""
+def velocity_direction_loss(
+    vx_s: Tensor, gear: Tensor, vx_zero_s, valid: Tensor, count: float | None = None
+) -> Tensor:
+    """Eq. 6: drive max(0,-v), reverse max(0,v), neutral/park |v|; v = vx_s - s(0).
+    ``count``: the whole batch's valid samples (a shard's part, module doc)."""
     v = vx_s - vx_zero_s
     drive = (gear > 0.5).to(v.dtype)
     rev = (gear < -0.5).to(v.dtype)
     idle = (gear.abs() <= 0.5).to(v.dtype)
     pen = drive * torch.relu(-v) + rev * torch.relu(v) + idle * v.abs()
-    return masked_mean(pen, valid)
+    return masked_mean(pen, valid, count)
 
 
-def yaw_prior_loss(r: Rollout, valid: Tensor) -> Tensor:
-    """Eq. 7: mean |ω̂_z - ω_ref| in scaled yaw units."""
-    return masked_mean((r.yaw_s - r.yaw_ref_s).abs(), valid)
+def yaw_prior_loss(r: Rollout, valid: Tensor, count: float | None = None) -> Tensor:
+    """Eq. 7: mean |ω̂_z - ω_ref| in scaled yaw units (``count``: as eq. 6's)."""
+    return masked_mean((r.yaw_s - r.yaw_ref_s).abs(), valid, count)
 
 
 def blind_zone_observation(cfg: LossConfig, vx_zero_s, vx_scale) -> BlindZoneObservation:
@@ -197,19 +239,22 @@ def blind_zone_observation(cfg: LossConfig, vx_zero_s, vx_scale) -> BlindZoneObs
 
 
 def nss_loss(
-    r: Rollout, t: Targets, cfg: LossConfig, vx_zero_s, vx_scale=None
+    r: Rollout, t: Targets, cfg: LossConfig, vx_zero_s, vx_scale=None,
+    share: Share | None = None,
 ) -> LossTerms:
     """The full objective (eq. 8) of a rollout against its targets. ``vx_scale`` (m/s per
-    scaled vx unit) is needed by ``blind_zone: observe`` only."""
+    scaled vx unit) is needed by ``blind_zone: observe`` only; ``share``: the targets are
+    one shard of a batch (module doc)."""
     blind = None
     if cfg.blind_zone == "observe":
         if vx_scale is None:
             raise ValueError("blind_zone 'observe' needs the model's vx scale")
         blind = blind_zone_observation(cfg, vx_zero_s, vx_scale)
-    ls = state_loss(r, t, cfg.kind, blind=blind)
-    ly = output_loss(r, t, cfg.kind)
-    lv = velocity_direction_loss(r.vx_s, t.gear, vx_zero_s, t.valid)
-    lw = yaw_prior_loss(r, t.valid)
+    ls = state_loss(r, t, cfg.kind, blind=blind, share=share)
+    ly = output_loss(r, t, cfg.kind, share)
+    n = None if share is None else share.valid
+    lv = velocity_direction_loss(r.vx_s, t.gear, vx_zero_s, t.valid, n)
+    lw = yaw_prior_loss(r, t.valid, n)
     total = ls + ly + cfg.lambda_vx * lv + cfg.lambda_yaw * lw
     return LossTerms(total, ls, ly, lv, lw)
 
@@ -279,21 +324,24 @@ def _gain_penalty(
 
 
 def torque_gain_loss(
-    model: NSSModel, r: Rollout, u: Tensor, t: Targets, cfg: LossConfig, seed: int = 0
+    model: NSSModel, r: Rollout, u: Tensor, t: Targets, cfg: LossConfig, seed: int = 0,
+    share: Share | None = None,
 ) -> Tensor:
     """The torque-gain prior L_τ (module doc) of a rollout ``r`` of ``model`` on the
     physical inputs ``u`` (B, T, 4), at the points ``cfg.torque_prior_states`` names (the
     envelope's drawn under ``seed``, :func:`envelope_points`); a 0-d tensor in scaled ax
-    units (0 where there is no point: no moving sample in gear, an empty envelope)."""
+    units (0 where there is no point: no moving sample in gear, an empty envelope).
+    ``share``: ``t`` is one shard of a batch; the envelope part is the first shard's."""
     parts = []
     if cfg.torque_prior_states in ("logged", "both"):
         x_s = r.state_s.detach()
         gear = torch.sign(u[..., 0]).to(x_s.dtype)
         pen = _gain_penalty(model, x_s, model.scale_inputs(u.to(x_s.dtype)), gear, cfg)
-        parts.append(masked_mean(pen, t.moving * (gear != 0).to(pen.dtype)))
+        count = None if share is None else share.moving_in_gear
+        parts.append(masked_mean(pen, t.moving * (gear != 0).to(pen.dtype), count))
     if cfg.torque_prior_states in ("envelope", "both"):
         x_s, u_s, gear = envelope_points(model, cfg, seed)
-        if len(gear):
+        if len(gear) and (share is None or share.first):
             parts.append(_gain_penalty(model, x_s, u_s, gear, cfg).mean())
         else:
             parts.append(torch.zeros((), dtype=model.dtype))

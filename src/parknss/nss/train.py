@@ -38,16 +38,11 @@ from parknss.nss.averaging import WeightAverage
 from parknss.nss.batch import Batch, make_batch
 from parknss.nss.config import NSSConfig
 from parknss.nss.history import History
-from parknss.nss.losses import (
-    LossTerms,
-    decoupling_loss,
-    nss_loss,
-    output_loss,
-    state_loss,
-    torque_gain_loss,
-)
+from parknss.nss.losses import output_loss, state_loss
 from parknss.nss.model import NORMALIZED, NSSModel
+from parknss.nss.parallel import DataParallelSteps
 from parknss.nss.recipes import cosine, make_recipe
+from parknss.nss.step import local_step
 from parknss.vehicle import VehicleGeometry
 
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
@@ -121,23 +116,6 @@ def build_model(cfg: NSSConfig, normalizer: Normalizer, geometry: VehicleGeometr
     return model.to(DTYPES[cfg.train.dtype])
 
 
-def epoch_loss(
-    model: NSSModel, batch: Batch, cfg: NSSConfig, engine: str | None = None
-) -> LossTerms:
-    """Roll out every sequence of the batch and evaluate eq. 8."""
-    r = model.rollout(batch.x0, batch.u, engine=engine)
-    terms = nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0])
-    if cfg.loss.lambda_torque > 0.0:  # the torque-gain prior (opt-in; nss/losses.py)
-        lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss, cfg.train.seed)
-        terms.total = terms.total + cfg.loss.lambda_torque * lt
-        terms.torque_gain = lt
-    if cfg.loss.lambda_decouple > 0.0:  # the yaw-state decoupling prior (opt-in)
-        lc = decoupling_loss(model, cfg.loss, cfg.train.seed)
-        terms.total = terms.total + cfg.loss.lambda_decouple * lc
-        terms.decouple = lc
-    return terms
-
-
 def validation_losses(model: NSSModel, batch: Batch, cfg: NSSConfig) -> tuple[float, float]:
     """(moving-region state loss, output loss) of whole-trial open-loop rollouts."""
     with torch.no_grad():
@@ -145,6 +123,31 @@ def validation_losses(model: NSSModel, batch: Batch, cfg: NSSConfig) -> tuple[fl
         ls = state_loss(r, batch.targets, cfg.loss.kind, moving_yaw=True)
         ly = output_loss(r, batch.targets, cfg.loss.kind)
     return float(ls), float(ly)
+
+
+class _LocalSteps:
+    """The one-process step (:func:`parknss.nss.step.local_step`), shaped as
+    :class:`~parknss.nss.parallel.DataParallelSteps` (no other process, no CPU time but
+    this one's)."""
+
+    worker_cpu_s = 0.0
+
+    def __enter__(self) -> _LocalSteps:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def __call__(self, model, batch, cfg, step):
+        return local_step(model, batch, cfg, step)
+
+
+def _stepper(model: NSSModel, cfg: NSSConfig, steps_left: int):
+    """The training step of this fit: data-parallel over ``train.processes`` processes
+    (:mod:`parknss.nss.parallel`) or in this process alone (1, or nothing left to train)."""
+    if cfg.train.processes > 1 and steps_left > 0:
+        return DataParallelSteps(model, cfg, cfg.train.processes)
+    return _LocalSteps()
 
 
 def geometry_of(campaign: Campaign | None) -> VehicleGeometry:
@@ -231,52 +234,55 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
     best_epoch, best_value = hist.best()
     E = recipe.steps
     bar = _progress(E, start, progress)
+    stepper = _stepper(model, cfg, E - start)
+
+    def cpu_now() -> float:  # this fit's CPU time so far: its process and its workers'
+        return cpu_before + time.process_time() - c0 + stepper.worker_cpu_s
+
     try:
-        for e in range(start + 1, E + 1):
-            step = recipe.step(e)
-            for g in opt.param_groups:
-                g["lr"] = step.lr
-            row: dict = {"epoch": e, "lr": step.lr}
-            if recipe.name != "paper":
-                row["phase"] = step.phase
-            smoothed = None
-            if vbatch is not None and step.validate:
-                if avg is None:
-                    vs, vy = validation_losses(model, vbatch, cfg)
-                else:
-                    with avg.swapped_in(model):
+        with stepper as train_step:
+
+            for e in range(start + 1, E + 1):
+                step = recipe.step(e)
+                for g in opt.param_groups:
+                    g["lr"] = step.lr
+                row: dict = {"epoch": e, "lr": step.lr}
+                if recipe.name != "paper":
+                    row["phase"] = step.phase
+                smoothed = None
+                if vbatch is not None and step.validate:
+                    if avg is None:
                         vs, vy = validation_losses(model, vbatch, cfg)
-                row.update(val_state_moving=vs, val_output=vy)
-                smoothed = hist.add_criterion(e, vs)
-            opt.zero_grad(set_to_none=True)
-            terms = epoch_loss(model, step.batch, cfg)
-            if not torch.isfinite(terms.total):
-                raise ParknssError(f"training diverged at step {e} (loss {float(terms.total)})")
-            terms.total.backward()
-            row.update({f"train_{k}": v for k, v in terms.as_floats().items()})
-            del terms  # frees the graph now, so the fused kernels' buffers are recycled
-            if vbatch is None and step.full:
-                smoothed = hist.add_criterion(e, row["train_total"])
-            if cpu_before is not None:
-                row["cpu_s"] = cpu_before + time.process_time() - c0
-            hist.add_row(row)
-            if smoothed is not None and smoothed < best_value:
-                best_epoch, best_value = e, smoothed
-                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+                    else:
+                        with avg.swapped_in(model):
+                            vs, vy = validation_losses(model, vbatch, cfg)
+                    row.update(val_state_moving=vs, val_output=vy)
+                    smoothed = hist.add_criterion(e, vs)
+                opt.zero_grad(set_to_none=True)
+                terms = train_step(model, step.batch, cfg, e)  # forward + backward into .grad
+                row.update({f"train_{k}": v for k, v in terms.items()})
+                if vbatch is None and step.full:
+                    smoothed = hist.add_criterion(e, row["train_total"])
+                if cpu_before is not None:
+                    row["cpu_s"] = cpu_now()
+                hist.add_row(row)
+                if smoothed is not None and smoothed < best_value:
+                    best_epoch, best_value = e, smoothed
+                    best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+                    if avg is not None:
+                        best_state.update({k: v.clone() for k, v in avg.avg.items()})
+                opt.step()
                 if avg is not None:
-                    best_state.update({k: v.clone() for k, v in avg.avg.items()})
-            opt.step()
-            if avg is not None:
-                avg.update(model)
-            if out is not None and (e % cfg.train.checkpoint_every == 0 or e == E):
-                wall = wall_before + time.perf_counter() - t0
-                cpu = None if cpu_before is None else cpu_before + time.process_time() - c0
-                train_state.save(out, model, opt, hist, best_state, e, wall, fp, cpu,
-                                 None if avg is None else avg.avg)
-            bar.update(1)
-            bar.set_postfix(loss=f"{row['train_total']:.4f}", best=best_epoch)
-            if on_epoch is not None:
-                on_epoch(e)
+                    avg.update(model)
+                if out is not None and (e % cfg.train.checkpoint_every == 0 or e == E):
+                    wall = wall_before + time.perf_counter() - t0
+                    cpu = None if cpu_before is None else cpu_now()
+                    train_state.save(out, model, opt, hist, best_state, e, wall, fp, cpu,
+                                     None if avg is None else avg.avg)
+                bar.update(1)
+                bar.set_postfix(loss=f"{row['train_total']:.4f}", best=best_epoch)
+                if on_epoch is not None:
+                    on_epoch(e)
     finally:
         bar.close()
     if best_state is not None:
@@ -291,7 +297,7 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
         wall_s=wall_before + time.perf_counter() - t0,
         window_length=L,
         n_windows=recipe.full.n,
-        cpu_s=None if cpu_before is None else cpu_before + time.process_time() - c0,
+        cpu_s=None if cpu_before is None else cpu_now(),
         recipe=recipe.name,
         train_ids=[t.id for t in train],
         val_ids=[t.id for t in val],

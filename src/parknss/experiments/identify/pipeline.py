@@ -154,12 +154,14 @@ class Pipeline:
 
     def phase_a_ahead(self):
         """While the NSS fits: the actuator study's Phase A (which needs no NSS) fitted in
-        ``workers - 1`` background processes into :meth:`phase_a_cache`, when this run
-        will run the study itself with a local pool of 2 or more workers
+        the background processes the NSS fit leaves free (``workers`` less the fit's
+        ``train.processes``) into :meth:`phase_a_cache`, when this run will run the study
+        itself with a local pool of 2 or more workers and at least one is free
         (``phase_a_ahead`` in configs/identify.yaml); else nothing."""
         inp = self.inp
+        free = inp.workers - self.nss_config().train.processes
         if not (self.cfg.phase_a_ahead and inp.selection is None and inp.executor == "local"
-                and inp.workers >= 2 and "selection" in wanted_stages(inp)):
+                and inp.workers >= 2 and free >= 1 and "selection" in wanted_stages(inp)):
             return contextlib.nullcontext()
         from parknss.actuators.config import load_actuator_config
         from parknss.chain.selection import phase_a_plan
@@ -167,9 +169,9 @@ class Pipeline:
 
         plan = phase_a_plan(self.campaign, str(self.campaign_dir()),
                             load_actuator_config(inp.actuator_config))
-        self.say(f"  [actuators] Phase A ahead: {len(plan.jobs)} fits in {inp.workers - 1} "
+        self.say(f"  [actuators] Phase A ahead: {len(plan.jobs)} fits in {free} "
                  "background process(es) beside the NSS fit")
-        return _Ahead(Prefetch(plan.jobs, self.phase_a_cache(), inp.workers - 1), self.say)
+        return _Ahead(Prefetch(plan.jobs, self.phase_a_cache(), free), self.say)
 
     def plants(self) -> list[str]:
         return ["kinematic", "chain", *(["reference"] if self.truth else [])]
