@@ -102,6 +102,31 @@ def test_train(sig, code, word, tmp_path):
 
 
 @pytest.mark.parametrize(("sig", "code", "word"), SIGNALS)
+def test_data_parallel_train_stops_its_worker(sig, code, word, tmp_path):
+    """``train --processes 2``: the same exit and line, the state kept, and the worker
+    process (which ignores SIGINT: the fit decides) gone with the fit."""
+    out = tmp_path / "t"
+    argv = ["train", "--out", str(out), *TINY_SET, "--set", "train.epochs=100000",
+            "--set", "train.checkpoint_every=1", "--processes", "2"]
+    state = out / "state" / "train_state.json"
+    workers: list[int] = []
+
+    def started(pid: int) -> bool:
+        workers[:] = [k for k in _children(pid) if "multiprocessing" in _cmdline(k)
+                      and "resource_tracker" not in _cmdline(k)]
+        return state.is_file() and bool(workers)
+
+    rc, lines, _ = _interrupt(argv, started, sig, tmp_path)
+    assert rc == code, "\n".join(lines[-30:])
+    line = _one_line(lines, word)
+    assert f"resume with `parknss train --out {out} --resume`" in line
+    deadline = time.monotonic() + 10
+    while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [w for w in workers if _alive(w)], "the worker outlived the fit"
+
+
+@pytest.mark.parametrize(("sig", "code", "word"), SIGNALS)
 def test_grid_stops_its_workers(sig, code, word, tmp_path):
     out = tmp_path / "g"
     argv = ["grid", "--grid", "36", "--cells", "0-11", "--plants", "kinematic",

@@ -77,6 +77,9 @@ def register(app: typer.Typer) -> None:
         data: Path | None = data_opt, config: Path | None = config_opt,
         epochs: int | None = epochs_opt, seed: int | None = seed_opt,
         set_: list[str] = set_opt,
+        processes: int | None = typer.Option(
+            None, "--processes", help="Share each step's windows over N processes "
+            "(train.processes; data-parallel, another rounding: a fit of its own)."),
         out: Path = typer.Option(Path("runs/train"), "--out", help="Run folder."),
         resume: bool = typer.Option(False, "--resume", help="Continue from out/state."),
         overwrite: bool = typer.Option(
@@ -89,8 +92,10 @@ def register(app: typer.Typer) -> None:
         from parknss.experiments.training import TrainInputs, train_deployment
         from parknss.nss.config import cli_overrides
 
-        inputs = TrainInputs(out=out, data=data, config=config,
-                             overrides=cli_overrides(set_, epochs, seed), resume=resume,
+        over = cli_overrides(set_, epochs, seed)
+        if processes is not None:
+            over.setdefault("train", {})["processes"] = processes
+        inputs = TrainInputs(out=out, data=data, config=config, overrides=over, resume=resume,
                              overwrite=overwrite)
         doc, text = train_deployment(inputs)
         _emit(doc, as_json, text)

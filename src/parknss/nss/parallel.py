@@ -27,9 +27,9 @@ their pipes and they exit. A worker's error is raised in the fit's process in on
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import time
-from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -56,7 +56,7 @@ def _flat(tensors) -> np.ndarray:
 def _batch_doc(batch: Batch) -> dict[str, Any]:
     """A batch as NumPy arrays (what crosses the pipe)."""
     t = batch.targets
-    doc = {f.name: getattr(t, f.name).numpy() for f in fields(Targets)}
+    doc = {f.name: getattr(t, f.name).numpy() for f in dataclasses.fields(Targets)}
     return {"x0": batch.x0.numpy(), "u": batch.u.numpy(), "targets": doc,
             "lengths": list(batch.lengths)}
 
@@ -77,8 +77,9 @@ class DataParallelSteps:
         self.model, self.cfg, self.processes = model, cfg, processes
         self._procs: list[Any] = []
         self._conns: list[Any] = []
-        self._batch: Batch | None = None  # the batch the workers hold shards of
-        self._plan: list[tuple[torch.Tensor, Share]] = []
+        self._batch: Batch | None = None  # the batch object the workers hold shards of
+        self._shard0: Batch | None = None  # this process's shard of it
+        self._shares: list[Share] = []  # each shard's Share
         self._cpu: dict[int, float] = {}  # each worker's CPU time, s, as last reported
 
     @property
@@ -138,32 +139,32 @@ class DataParallelSteps:
         return msg[1:]
 
     def _send_batch(self, batch: Batch) -> None:
-        """Cut ``batch`` into shards and hand shards 1.. to their workers."""
-        shares = []
-        self._plan = []
+        """Cut ``batch`` into shards, keep shard 0, hand shards 1.. to their workers."""
+        whole = Share.of(batch.targets, first=True)
+        self._shares = []
         for rank, idx in enumerate(shard_indices(batch.n, self.processes)):
-            shard = batch.select(idx)
-            share = Share.of(batch.targets, first=rank == 0)
-            self._plan.append((idx, share))
-            shares.append(shard)
-            if rank > 0:
-                self._conns[rank - 1].send(("batch", _batch_doc(shard), share))
-        self._shard0 = shares[0]
+            share = dataclasses.replace(whole, first=rank == 0)
+            self._shares.append(share)
+            if rank == 0:
+                self._shard0 = batch.select(idx)
+            else:
+                self._conns[rank - 1].send(("batch", _batch_doc(batch.select(idx)), share))
         self._batch = batch
 
     def __call__(self, model: NSSModel, batch: Batch, cfg: NSSConfig, step: int
                  ) -> dict[str, float]:
         """One step's forward and backward over all shards (gradients accumulate into
         ``model``'s ``.grad``); the whole batch's loss terms as floats."""
-        if batch is not self._batch:
+        if batch is not self._batch:  # a new batch (the steps never change one in place)
             self._send_batch(batch)
-        params = [p for p in model.parameters()]
+        assert self._shard0 is not None
+        params = list(model.parameters())
         weights = _flat(params)
-        busy = range(1, len(self._plan))
+        busy = range(1, len(self._shares))
         for rank in busy:
             self._conns[rank - 1].send(("step", weights))
         try:
-            terms = local_step(model, self._shard0, cfg, step, self._plan[0][1])
+            terms = local_step(model, self._shard0, cfg, step, self._shares[0])
         except Exception:  # (an interrupt ends the fit and its workers: nothing to keep)
             for rank in busy:  # their replies to this step, so the pipes stay in step
                 with contextlib.suppress(ParknssError):
