@@ -213,3 +213,17 @@ os.kill(os.getpid(), signal.SIGKILL)
     while running() and time.monotonic() < end:
         time.sleep(0.05)
     assert not running()
+
+
+def _fit_rows_in_a_pool():
+    return _rows(_fit(_cfg(2, epochs=3)))
+
+
+def test_a_fit_in_a_pool_worker_starts_its_workers():
+    """A study's fold fits run in the local executor's pool (loky), whose start method a
+    fresh interpreter does not know: the fit's worker starts all the same (under spawn)
+    and the fit is the one run here."""
+    from joblib import Parallel, delayed
+
+    pooled = Parallel(n_jobs=2, backend="loky")(delayed(_fit_rows_in_a_pool)() for _ in "ab")
+    assert pooled == [_fit_rows_in_a_pool()] * 2

@@ -99,7 +99,8 @@ class DataParallelSteps:
                 here, there = ctx.Pipe()
                 proc = ctx.Process(target=_worker, args=(there, init, os.getpid()),
                                    daemon=True, name=f"parknss-dp{rank}")
-                proc.start()
+                with _plain_start_method():
+                    proc.start()
                 there.close()  # the worker's end lives in the worker only: EOF when it dies
                 self._procs.append(proc)
                 self._conns.append(here)
@@ -185,6 +186,25 @@ class DataParallelSteps:
         if not np.isfinite(terms["total"]):
             raise ParknssError(f"training diverged at step {step} (loss {terms['total']})")
         return terms
+
+
+@contextlib.contextmanager
+def _plain_start_method():
+    """A fit run in a pool worker of the local executor (loky) would hand its workers the
+    pool's start method, ``loky``, which a fresh interpreter does not know (their start
+    fails in multiprocessing's ``prepare``): start them under ``spawn`` and put the pool's
+    method back."""
+    import multiprocessing
+
+    before = multiprocessing.get_start_method(allow_none=True)
+    if before in (None, "spawn", "fork", "forkserver"):
+        yield
+        return
+    multiprocessing.set_start_method("spawn", force=True)
+    try:
+        yield
+    finally:
+        multiprocessing.set_start_method(before, force=True)
 
 
 def _worker(conn, init: dict[str, Any], parent: int) -> None:
