@@ -93,6 +93,7 @@ class DataParallelSteps:
         ctx = multiprocessing.get_context("spawn")
         m = self.model
         init = {"cfg": self.cfg, "normalizer": m.normalizer, "geometry": m.geometry,
+                "dtype": m.dtype,
                 "state": {k: v.detach().numpy() for k, v in m.state_dict().items()}}
         try:
             for rank in range(1, self.processes):
@@ -215,8 +216,7 @@ def _worker(conn, init: dict[str, Any], parent: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     cfg: NSSConfig = init["cfg"]
     torch.set_num_threads(cfg.train.threads)
-    dtype = {"float32": torch.float32, "float64": torch.float64}[cfg.train.dtype]
-    model = NSSModel(cfg.model, init["normalizer"], init["geometry"]).to(dtype)
+    model = NSSModel(cfg.model, init["normalizer"], init["geometry"]).to(init["dtype"])
     model.load_state_dict({k: torch.from_numpy(v) for k, v in init["state"].items()})
     params = list(model.parameters())
     shard: Batch | None = None
