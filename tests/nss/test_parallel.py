@@ -227,3 +227,22 @@ def test_a_fit_in_a_pool_worker_starts_its_workers():
 
     pooled = Parallel(n_jobs=2, backend="loky")(delayed(_fit_rows_in_a_pool)() for _ in "ab")
     assert pooled == [_fit_rows_in_a_pool()] * 2
+
+
+def test_train_command_on_two_processes_says_so_and_records_it(tmp_path, capsys):
+    """`parknss train --processes 2` (bundled campaign, tiny net): the summary names the
+    processes and the CPU time of all of them; the model records the setting."""
+    import json
+
+    from parknss.cli import main
+
+    out = tmp_path / "t"
+    tiny = [a for k, v in (("model.state_units", 4), ("model.state_layers", 1),
+                           ("model.output_units", 4), ("model.output_layers", 1))
+            for a in ("--set", f"{k}={v}")]
+    assert main(["train", "--out", str(out), "--epochs", "2", "--processes", "2",
+                 *tiny]) == 0
+    assert " s on 2 processes (" in capsys.readouterr().out
+    doc = json.loads((out / "model" / "model.json").read_text())
+    assert doc["config"]["train"]["processes"] == 2
+    assert doc["training"]["cpu_s"] > 0.0

@@ -74,9 +74,11 @@ def train_deployment(inputs: TrainInputs) -> tuple[dict, str]:
     )
     doc = {"model": str(model_dir), "figure": str(fig), **res.training_meta()}
     steps = "epochs" if res.recipe == "paper" else f"steps of the {res.recipe} recipe"
+    p = res.config.train.processes
+    on = f" on {p} processes ({res.cpu_s or 0.0:.0f} CPU s)" if p > 1 else ""
     text = (
         f"trained {res.epochs_run} {steps} on {len(campaign)} trials "
-        f"({res.n_windows} windows of {res.window_length}) in {res.wall_s:.0f} s; "
+        f"({res.n_windows} windows of {res.window_length}) in {res.wall_s:.0f} s{on}; "
         f"best step {res.best_epoch} (smoothed {h.criterion} {res.best_value:.5f}); "
         f"model in {model_dir}"
     )
