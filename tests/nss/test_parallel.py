@@ -151,6 +151,15 @@ def test_a_worker_killed_mid_fit_is_one_line_error_and_nothing_is_left(tmp_path)
     assert res.epochs_run == 6
 
 
+def test_more_processes_than_cores_is_said_in_one_note(monkeypatch, capsys):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    with parallel.DataParallelSteps(tiny_model(CAMP)[0], _cfg(2), 2):
+        pass
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("parknss: note: train.processes 2 > the 1 ")
+    assert not multiprocessing.active_children()
+
+
 def test_divergence_on_either_shard_and_a_worker_error_are_one_line():
     """A non-finite loss on the fit's own shard or on the worker's stops the step, naming
     it; a worker's exception comes back as one line; no process is left."""

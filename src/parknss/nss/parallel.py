@@ -89,7 +89,14 @@ class DataParallelSteps:
 
     def __enter__(self) -> DataParallelSteps:
         import multiprocessing
+        import sys
 
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+        if self.processes > cores:  # runs as asked, but say it will not be faster
+            print(f"parknss: note: train.processes {self.processes} > the {cores} CPU "
+                  "core(s) this process may use: the processes take turns, and the fit is "
+                  "slower than with fewer", file=sys.stderr)
         ctx = multiprocessing.get_context("spawn")
         m = self.model
         init = {"cfg": self.cfg, "normalizer": m.normalizer, "geometry": m.geometry,
