@@ -241,7 +241,6 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
 
     try:
         with stepper as train_step:
-
             for e in range(start + 1, E + 1):
                 step = recipe.step(e)
                 for g in opt.param_groups:
