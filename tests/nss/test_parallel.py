@@ -43,6 +43,11 @@ def _rows(res):
     return [{k: v for k, v in r.items() if k != "cpu_s"} for r in res.history.rows]
 
 
+def _workers() -> list:
+    """This process's live data-parallel workers (other tests' pools may live beside)."""
+    return [p for p in multiprocessing.active_children() if p.name.startswith("parknss-dp")]
+
+
 def _same_weights(a, b) -> bool:
     sa, sb = a.state_dict(), b.state_dict()
     return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
@@ -126,7 +131,7 @@ def test_two_process_fit_is_deterministic_resumable_and_its_own_identity(tmp_pat
 
     with pytest.raises(KilledError):
         _fit(cfg, out_dir=tmp_path, on_epoch=killer)
-    assert not multiprocessing.active_children()  # the worker went with the fit
+    assert not _workers()  # the worker went with the fit
     seen = []
     res = _fit(cfg, out_dir=tmp_path, resume=True, on_epoch=seen.append)
     assert seen == [4, 5, 6, 7, 8]
@@ -141,12 +146,12 @@ def test_two_process_fit_is_deterministic_resumable_and_its_own_identity(tmp_pat
 def test_a_worker_killed_mid_fit_is_one_line_error_and_nothing_is_left(tmp_path):
     def kill_worker(e):
         if e == 2:
-            (proc,) = multiprocessing.active_children()
+            (proc,) = _workers()
             os.kill(proc.pid, signal.SIGKILL)
 
     with pytest.raises(ParknssError, match=r"data-parallel worker 1 exited unexpectedly"):
         _fit(_cfg(2, checkpoint_every=1), out_dir=tmp_path, on_epoch=kill_worker)
-    assert not multiprocessing.active_children()
+    assert not _workers()
     res = _fit(_cfg(2, checkpoint_every=1), out_dir=tmp_path, resume=True)
     assert res.epochs_run == 6
 
@@ -157,7 +162,7 @@ def test_more_processes_than_cores_is_said_in_one_note(monkeypatch, capsys):
         pass
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("parknss: note: train.processes 2 > the 1 ")
-    assert not multiprocessing.active_children()
+    assert not _workers()
 
 
 def test_divergence_on_either_shard_and_a_worker_error_are_one_line():
@@ -178,7 +183,7 @@ def test_divergence_on_either_shard_and_a_worker_error_are_one_line():
             bad.u[window, 5, 1] = float("nan")
             with pytest.raises(ParknssError, match=f"training diverged at step {step}"):
                 steps(model, bad, cfg, step)
-    assert not multiprocessing.active_children()
+    assert not _workers()
 
 
 def test_the_worker_of_a_killed_fit_exits():
