@@ -50,7 +50,15 @@ def shard_indices(n: int, processes: int) -> list[torch.Tensor]:
 
 
 def _flat(tensors) -> np.ndarray:
+    """Tensors as one flat vector (what crosses the pipe); :func:`_views` undoes it."""
     return torch.cat([t.detach().reshape(-1) for t in tensors]).numpy()
+
+
+def _views(flat: np.ndarray, like: list[torch.Tensor]) -> list[torch.Tensor]:
+    """``flat`` (:func:`_flat` of tensors shaped as ``like``) cut back into those shapes."""
+    sizes = [t.numel() for t in like]
+    parts = torch.from_numpy(flat).split(sizes)
+    return [v.view_as(t) for v, t in zip(parts, like, strict=True)]
 
 
 def _batch_doc(batch: Batch) -> dict[str, Any]:
@@ -183,10 +191,7 @@ class DataParallelSteps:
             grads, part, self._cpu[rank] = self._recv(rank)
             for k, v in part.items():
                 terms[k] = terms.get(k, 0.0) + v
-            offset = 0
-            for p in params:
-                g = torch.from_numpy(grads[offset : offset + p.numel()]).view_as(p)
-                offset += p.numel()
+            for p, g in zip(params, _views(grads, params), strict=True):
                 if p.grad is None:
                     p.grad = g.clone()
                 else:
@@ -239,12 +244,9 @@ def _worker(conn, init: dict[str, Any], parent: int) -> None:
             if msg[0] == "batch":
                 shard, share = _batch_of(msg[1]), msg[2]
                 continue
-            weights = msg[1]
-            offset = 0
             with torch.no_grad():
-                for p in params:
-                    p.copy_(torch.from_numpy(weights[offset : offset + p.numel()]).view_as(p))
-                    offset += p.numel()
+                for p, w in zip(params, _views(msg[1], params), strict=True):
+                    p.copy_(w)
             model.zero_grad(set_to_none=True)
             if shard is None or share is None:
                 raise RuntimeError("a step before any batch")
