@@ -32,6 +32,9 @@ def _cfg(processes=1, epochs=6, recipe="paper", **train):
     cfg = tiny_config("float64", train={"epochs": epochs, "seed": 4, "val_every": 2,
                                         "smooth_window": 3, "processes": processes,
                                         "recipe": recipe, **train})
+    if recipe == "coarse":
+        return with_overrides(cfg, coarse={"factor": 3, "epochs": 4, "finish_epochs": 2,
+                                           "val_every": 2})
     return with_overrides(cfg, fast=FAST) if recipe == "fast" else cfg
 
 
@@ -98,7 +101,7 @@ def test_shard_losses_and_gradients_add_up_to_the_batch(loss):
         torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-14)
 
 
-@pytest.mark.parametrize("recipe", ["paper", "fast"])
+@pytest.mark.parametrize("recipe", ["paper", "fast", "coarse"])
 def test_two_process_fit_is_the_one_process_fit_up_to_rounding(recipe):
     """Same objective and Adam steps: every history value within 1e-9 relative (float64);
     the fit's CPU time counts its worker's too."""

@@ -9,11 +9,19 @@ import pytest
 import torch
 
 from helpers.synth import make_campaign, tiny_config, tiny_model
+from parknss.data.decimate import decimate, grid_length
 from parknss.data.windows import make_windows
 from parknss.errors import ConfigError
 from parknss.nss import train_state
 from parknss.nss.config import with_overrides
-from parknss.nss.recipes import FastRecipe, PaperRecipe, cosine, make_recipe
+from parknss.nss.recipes import (
+    HELD_INPUTS,
+    CoarseRecipe,
+    FastRecipe,
+    PaperRecipe,
+    cosine,
+    make_recipe,
+)
 from parknss.nss.train import fit, learning_rate
 
 CAMP = make_campaign(130, reps=2)
@@ -133,3 +141,61 @@ def test_fit_identity_has_the_fused_kernels_only_when_not_the_reference():
     fast = fit_identity(with_overrides(cfg, model={"fused_kernels": "fast"}))
     assert fast["model"]["fused_kernels"] == "fast"
     assert {k: v for k, v in fast["model"].items() if k != "fused_kernels"} == ident["model"]
+
+
+COARSE = {"factor": 4, "epochs": 9, "lr": 3e-3, "val_every": 4, "finish_epochs": 5,
+          "finish_lr": 1e-3}
+
+
+def _coarse_cfg(**coarse):
+    cfg = tiny_config(train={"recipe": "coarse", "val_every": 2, "lr_min": 1e-5})
+    return with_overrides(cfg, coarse={**COARSE, **coarse})
+
+
+def test_coarse_phases_batches_lr_and_validation():
+    """Phase 1: the paper's windows of the decimated trials (same count, L on the grid of
+    every m-th sample, stride m, the held inputs averaged); phase 2: the full-rate ones."""
+    cfg = _coarse_cfg()
+    r, L = _recipe(cfg)
+    assert isinstance(r, CoarseRecipe) and r.steps == 14
+    c, full = r.coarse, r.full
+    assert (c.stride, full.stride) == (4, 1) and c.n == full.n
+    assert c.steps == grid_length(L, 4) and full.steps == L
+    w = make_windows([decimate(t, 4, HELD_INPUTS) for t in TRAIN], grid_length(L, 4))
+    assert torch.equal(c.u, torch.as_tensor(w.inputs)) and c.lengths == list(w.lengths)
+    assert torch.equal(c.x0, torch.as_tensor(w.states[:, 0]))
+    steps = [r.step(k) for k in range(1, 15)]
+    assert [s.phase for s in steps] == ["coarse"] * 9 + ["full"] * 5
+    assert all(s.batch is c and not s.full for s in steps[:9])
+    assert all(s.batch is full and s.full for s in steps[9:])
+    assert steps[0].lr == 3e-3 and steps[8].lr == pytest.approx(1e-5)
+    assert steps[9].lr == 1e-3 and steps[-1].lr == pytest.approx(1e-5)
+    assert [k for k, s in enumerate(steps, 1) if s.validate] == [1, 5, 9, 10, 12, 14]
+
+
+def test_coarse_fit_learns_and_reports_its_recipe():
+    res = fit(TRAIN, VAL, _coarse_cfg(epochs=40, finish_epochs=4), progress=False)
+    rows = res.history.rows
+    assert res.recipe == "coarse" and res.epochs_run == 44 and len(rows) == 44
+    assert [r["phase"] for r in rows] == ["coarse"] * 40 + ["full"] * 4
+    raw = res.history.crit_raw  # held-out, at the full rate, in both phases
+    assert res.history.crit_epochs == [*range(1, 41, 4), 41, 43, 44]
+    assert min(raw) < 0.9 * raw[0]
+    assert res.training_meta()["recipe"] == "coarse"
+
+
+def test_coarse_config_refusals_and_identity():
+    from parknss.nss.config import fit_identity
+
+    with pytest.raises(ConfigError, match="epochs"):
+        _coarse_cfg(epochs=0, finish_epochs=0)
+    with pytest.raises(ConfigError):
+        _coarse_cfg(factor=0)
+    coarse = _coarse_cfg()
+    ident = fit_identity(coarse)
+    assert "coarse" in ident and "fast" not in ident and "epochs" not in ident["train"]
+    assert fit_identity(with_overrides(coarse, fast={"batch": 7})) == ident
+    assert fit_identity(with_overrides(coarse, coarse={"factor": 8})) != ident
+    for other in (tiny_config(), _fast_cfg()):  # the keys stored fits were made with
+        assert "coarse" not in fit_identity(other)
+        assert fit_identity(with_overrides(other, coarse={"factor": 8})) == fit_identity(other)

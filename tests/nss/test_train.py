@@ -80,15 +80,19 @@ FAST = {"window": 40, "batch": 3, "updates": 7, "val_every": 2, "finish_epochs":
 @pytest.mark.parametrize(
     ("dtype", "val", "recipe"),
     [("float64", VAL, "paper"), ("float32", (), "paper"), ("float64", VAL, "fast"),
-     ("float64", VAL, "fast-ema")],
+     ("float64", VAL, "fast-ema"), ("float64", VAL, "coarse")],
 )
 def test_killed_and_resumed_fit_is_bit_identical(tmp_path, dtype, val, recipe):
     """Validated fit in float64, the deployment shape (float32, no validation set), and
     the fast recipe, killed in its minibatch phase (its draws are a function of the step),
-    also with a weight average (fast.ema: its state is saved and restored)."""
+    also with a weight average (fast.ema: its state is saved and restored), and the coarse
+    recipe, killed in its coarse phase."""
     cfg = _cfg(12, seed=3, checkpoint_every=4, dtype=dtype, recipe=recipe.split("-")[0])
     if recipe.startswith("fast"):
         cfg = with_overrides(cfg, fast={**FAST, "ema": 0.8 if recipe == "fast-ema" else 0.0})
+    if recipe == "coarse":  # killed in its coarse phase
+        cfg = with_overrides(cfg, coarse={"factor": 4, "epochs": 8, "val_every": 3,
+                                          "finish_epochs": 4})
     ref = _fit(cfg, val=val)
 
     def killer(e):

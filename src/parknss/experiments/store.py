@@ -53,6 +53,7 @@ CODE_FILES: tuple[str, ...] = (
     "data/trial.py",  # trials and campaigns
     "data/normalize.py",  # the normalizers
     "data/windows.py",  # the training windows
+    "data/decimate.py",  # the coarse grid of the coarse-to-fine recipe
     "data/splits.py",  # which trials a fold trains and scores on
     "metrics/errors.py",  # the scores
     "signals.py",  # units, the blind zone, the MSE factors

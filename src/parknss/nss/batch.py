@@ -21,12 +21,16 @@ from parknss.signals import kmh_to_ms
 
 @dataclass
 class Batch:
-    """x0 (N, 2) physical initial state, u (N, T, 4) physical inputs, scaled targets."""
+    """x0 (N, 2) physical initial state, u (N, T, 4) physical inputs, scaled targets.
+
+    ``stride``: model steps Δt per sample of the batch (a batch of trials decimated by m,
+    :mod:`parknss.data.decimate`, is rolled out with an Euler step of m·Δt)."""
 
     x0: Tensor
     u: Tensor
     targets: Targets
     lengths: list[int]
+    stride: int = 1
 
     @property
     def n(self) -> int:
@@ -40,11 +44,13 @@ class Batch:
         """The sequences ``idx`` (1-D index tensor) of this batch, in that order."""
         t = self.targets
         targets = Targets(**{f.name: getattr(t, f.name)[idx] for f in fields(Targets)})
-        return Batch(self.x0[idx], self.u[idx], targets, [self.lengths[i] for i in idx.tolist()])
+        return Batch(self.x0[idx], self.u[idx], targets, [self.lengths[i] for i in idx.tolist()],
+                     self.stride)
 
 
-def make_batch(model: NSSModel, w: Windows, blind_zone_kmh: float) -> Batch:
-    """Batch of windows for ``model``; |vx| < blind_zone_kmh is masked out of ``moving``."""
+def make_batch(model: NSSModel, w: Windows, blind_zone_kmh: float, stride: int = 1) -> Batch:
+    """Batch of windows for ``model``; |vx| < blind_zone_kmh is masked out of ``moving``;
+    ``stride``: the windows' samples are ``stride`` model steps apart (:class:`Batch`)."""
     dt = model.dtype
     st = torch.as_tensor(w.states, dtype=dt)
     out = torch.as_tensor(w.outputs, dtype=dt)
@@ -62,4 +68,5 @@ def make_batch(model: NSSModel, w: Windows, blind_zone_kmh: float) -> Batch:
         valid=valid,
         moving=torch.as_tensor(moving_np, dtype=dt),
     )
-    return Batch(st[:, 0].clone(), torch.as_tensor(w.inputs, dtype=dt), targets, list(w.lengths))
+    return Batch(st[:, 0].clone(), torch.as_tensor(w.inputs, dtype=dt), targets, list(w.lengths),
+                 stride)

@@ -2,7 +2,8 @@
 
 Every default is the paper's; ``configs/nss.yaml`` lists them all. A YAML file overrides
 any subset, section by section (``model``, ``loss``, ``data``, ``train``, ``fast``,
-``limiter``). The ``fast`` section is the fast training recipe's, not the paper's.
+``coarse``, ``limiter``). The ``fast`` and ``coarse`` sections are this toolkit's training
+recipes, not the paper's.
 """
 
 from __future__ import annotations
@@ -130,10 +131,11 @@ class TrainConfig(StrictModel):
     # added after fits and run folders were stored: their keys stay as before
     omit_at_default = frozenset({"processes"})
 
-    recipe: Literal["paper", "fast"] = Field(
+    recipe: Literal["paper", "fast", "coarse"] = Field(
         "paper",
         description="paper: full-batch BPTT over the end-aligned windows for `epochs`; fast: "
-        "the `fast` section's minibatch phase, then a full-window finish (nss/recipes.py)",
+        "the `fast` section's minibatch phase, then a full-window finish; coarse: the "
+        "`coarse` section's coarse-step epochs, then a full-rate finish (nss/recipes.py)",
     )
     epochs: int = Field(3200, ge=1)
     lr: float = Field(2.0e-3, gt=0.0)
@@ -158,7 +160,10 @@ class TrainConfig(StrictModel):
 
 
 FAST_IGNORES: tuple[str, ...] = ("epochs", "lr", "schedule")
-"""Fields of the train section the fast recipe does not read (it has its own)."""
+"""Fields of the train section the fast and coarse recipes do not read (they have their own)."""
+
+RECIPE_SECTIONS: dict[str, str] = {"fast": "fast", "coarse": "coarse"}
+"""The config section each non-paper recipe reads (a fit names only its own)."""
 
 
 class FastConfig(StrictModel):
@@ -193,6 +198,34 @@ class FastConfig(StrictModel):
         return self
 
 
+class CoarseConfig(StrictModel):
+    """The coarse-to-fine recipe (``train.recipe: coarse``; not the paper's, see
+    nss/recipes.py). It reads these instead of ``train.epochs``, ``train.lr`` and
+    ``train.schedule``.
+
+    Phase 1: ``epochs`` full-batch Adam steps on the paper's windows of the training
+    trials decimated by ``factor`` (data/decimate.py), rolled out with an Euler step of
+    factor·dt; LR cosine from ``lr`` to ``train.lr_min``; validation (held-out trials at
+    the full rate, the deployment criterion) every ``val_every`` epochs. Phase 2:
+    ``finish_epochs`` paper epochs at the full rate, LR cosine from ``finish_lr`` to
+    ``train.lr_min``, validation every ``train.val_every``.
+    """
+
+    factor: int = Field(
+        16, ge=1, le=100, description="phase 1: samples per coarse step (Euler step factor·dt)")
+    epochs: int = Field(4000, ge=0, description="phase-1 full-batch steps at the coarse step")
+    lr: float = Field(4.0e-3, gt=0.0, description="phase-1 initial LR (cosine to lr_min)")
+    val_every: int = Field(25, ge=1, description="validate every N phase-1 epochs")
+    finish_epochs: int = Field(150, ge=0, description="phase-2 full-rate, full-batch steps")
+    finish_lr: float = Field(5.0e-4, gt=0.0, description="phase-2 initial LR (cosine)")
+
+    @model_validator(mode="after")
+    def _some_steps(self) -> CoarseConfig:
+        if self.epochs + self.finish_epochs < 1:
+            raise ValueError("the coarse recipe needs epochs + finish_epochs >= 1")
+        return self
+
+
 class LimiterConfig(StrictModel):
     """Inference-time gear-conditioned kinematic limiter (§V-B); off by default."""
 
@@ -215,6 +248,7 @@ class NSSConfig(StrictModel):
     data: DataConfig = DataConfig()
     train: TrainConfig = TrainConfig()
     fast: FastConfig = FastConfig()
+    coarse: CoarseConfig = CoarseConfig()
     limiter: LimiterConfig = LimiterConfig()
 
     @model_validator(mode="after")
@@ -226,9 +260,10 @@ class NSSConfig(StrictModel):
 
 def fit_identity(cfg: NSSConfig) -> dict:
     """The fields of ``cfg`` that decide a fit's numbers, as JSON: all but the torch thread
-    count; for a paper-recipe fit also without the recipe field and the fast recipe's
-    section, for a fast-recipe fit without the paper recipe's epoch cap, LR and schedule
-    (neither reads the other's). Resume fingerprints and result-store keys use it."""
+    count; for a paper-recipe fit also without the recipe field, for a fast or coarse
+    fit without the paper recipe's epoch cap, LR and schedule, and for every fit without
+    the sections of the recipes it does not use (none reads another's). Resume
+    fingerprints and result-store keys use it."""
     doc = cfg.model_dump(mode="json")
     doc["train"].pop("threads", None)
     if cfg.train.selection == "scored":  # the default keeps the keys it had without it
@@ -260,10 +295,12 @@ def fit_identity(cfg: NSSConfig) -> dict:
             doc["loss"].pop("torque_prior_samples", None)
     if cfg.train.recipe == "paper":
         doc["train"].pop("recipe", None)
-        doc.pop("fast", None)
     else:
         for k in FAST_IGNORES:
             doc["train"].pop(k, None)
+    for recipe, section in RECIPE_SECTIONS.items():  # only the fit's own recipe section
+        if cfg.train.recipe != recipe:
+            doc.pop(section, None)
     return doc
 
 

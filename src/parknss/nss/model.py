@@ -194,9 +194,10 @@ class NSSModel(nn.Module):
 
         return step
 
-    def integrate(self, x_s: Tensor, u_s: Tensor) -> Tensor:
-        """One step of the configured integrator, u held over the step; (B, 2)."""
-        dt = self.dt
+    def integrate(self, x_s: Tensor, u_s: Tensor, dt: float | None = None) -> Tensor:
+        """One step of the configured integrator, u held over the step; (B, 2). ``dt``: the
+        step in s (default the model's, ``model.dt``)."""
+        dt = self.dt if dt is None else dt
         f = self.derivative
         if self.cfg.integrator == "euler":
             return x_s + dt * f(x_s, u_s)
@@ -216,7 +217,7 @@ class NSSModel(nn.Module):
         ref_s = self.yaw_scaled(self.yaw_ref(x0_s[:, 0], u0_s[:, I_STEER]))
         return torch.stack([x0_s[:, 0], x0_s[:, 1] - ref_s], dim=-1)
 
-    def _fused(self, x0_s: Tensor, u_s: Tensor) -> Tensor:
+    def _fused(self, x0_s: Tensor, u_s: Tensor, dt: float) -> Tensor:
         """Internal states (B, T, 2) by the fused Euler kernel (see parknss.nss.fused)."""
         lin = linear_layers(self.state_net)
         U = u_s[:, :-1].transpose(0, 1).contiguous()
@@ -225,19 +226,21 @@ class NSSModel(nn.Module):
         needs_grad = x0_s.requires_grad or U.requires_grad
         needs_grad = needs_grad or any(p.requires_grad for p in self.state_net.parameters())
         if torch.is_grad_enabled() and needs_grad:
-            X = FusedEulerRollout.apply(self.dt, self.cfg.fused_kernels, *args, *hidden)
+            X = FusedEulerRollout.apply(dt, self.cfg.fused_kernels, *args, *hidden)
         else:
             X = euler_forward(
-                *args, hidden[0::2], hidden[1::2], dt=self.dt, kernels=self.cfg.fused_kernels
+                *args, hidden[0::2], hidden[1::2], dt=dt, kernels=self.cfg.fused_kernels
             )
         return X.transpose(0, 1)
 
-    def _eager(self, x0_s: Tensor, u_s: Tensor, limiter: StateLimiter | None) -> Tensor:
+    def _eager(
+        self, x0_s: Tensor, u_s: Tensor, limiter: StateLimiter | None, dt: float
+    ) -> Tensor:
         """Internal states (B, T, 2) by the plain per-step loop (any integrator)."""
         xs = [x0_s]
         x = x0_s
         for k in range(u_s.shape[1] - 1):
-            x = self.integrate(x, u_s[:, k])
+            x = self.integrate(x, u_s[:, k], dt)
             if limiter is not None:
                 x = limiter(x, u_s[:, k])
             xs.append(x)
@@ -310,12 +313,19 @@ class NSSModel(nn.Module):
         u: Tensor,
         limiter: StateLimiter | None = None,
         engine: str | None = None,
+        stride: int = 1,
     ) -> Rollout:
         """Open-loop prediction from the measured initial state.
 
         x0: (B, 2) physical [vx m/s, yaw_rate rad/s] at k = 0; u: (B, T, 4) physical
         [gear, torque N·m, brake bar, steer deg]. Returns a :class:`Rollout` of (B, T).
+        ``stride``: samples of u are ``stride`` model steps apart, so each step integrates
+        over stride·dt (a decimated batch, :mod:`parknss.data.decimate`); 1 in every use
+        but the coarse phase of ``train.recipe: coarse``.
         """
+        if stride < 1:
+            raise DataError(f"stride must be >= 1, got {stride}")
+        h = self.dt * stride
         self._check(x0, u)
         x0, u = x0.to(self.dtype), u.to(self.dtype)
         u_s = self.scale_inputs(u)
@@ -324,9 +334,9 @@ class NSSModel(nn.Module):
         if u.shape[1] == 1:
             X_s = x0_s[:, None]
         elif eng == "fused":
-            X_s = self._fused(x0_s, u_s)
+            X_s = self._fused(x0_s, u_s, h)
         else:
-            X_s = self._eager(x0_s, u_s, limiter)
+            X_s = self._eager(x0_s, u_s, limiter, h)
         return self.readout(X_s, u_s, fused=eng == "fused")
 
     def initial_state(self, x0: Tensor, u0: Tensor) -> Tensor:

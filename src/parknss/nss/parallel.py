@@ -66,13 +66,13 @@ def _batch_doc(batch: Batch) -> dict[str, Any]:
     t = batch.targets
     doc = {f.name: getattr(t, f.name).numpy() for f in dataclasses.fields(Targets)}
     return {"x0": batch.x0.numpy(), "u": batch.u.numpy(), "targets": doc,
-            "lengths": list(batch.lengths)}
+            "lengths": list(batch.lengths), "stride": batch.stride}
 
 
 def _batch_of(doc: dict[str, Any]) -> Batch:
     targets = Targets(**{k: torch.from_numpy(v) for k, v in doc["targets"].items()})
     return Batch(torch.from_numpy(doc["x0"]), torch.from_numpy(doc["u"]), targets,
-                 doc["lengths"])
+                 doc["lengths"], doc["stride"])
 
 
 class DataParallelSteps:

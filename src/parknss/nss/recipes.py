@@ -28,6 +28,23 @@ on the paper-size net, 8 windows of 1024 samples cost 0.18 CPU s, 16 windows 0.2
 windows 0.51, a paper epoch of 29 x 2227 about 1.1), yet phase 1 still makes many
 updates for the CPU time of few epochs; phase 2 teaches the whole-window horizon the
 short windows cannot see.
+
+``coarse`` (this toolkit's, not the paper's; ``coarse`` section of the NSS config):
+
+1. ``coarse.epochs`` full-batch steps on the paper's windows of the training trials
+   decimated by m = ``coarse.factor`` (:mod:`parknss.data.decimate`: every m-th sample,
+   the continuous inputs averaged over each step), rolled out with an Euler step of m·dt:
+   the same windows and horizon in seconds at 1/m of the sequential steps, so an epoch
+   costs about 1/m of a paper epoch. f_θ is a time derivative (eq. 3b), so the vector
+   field learnt at m·dt is the one the full-rate model integrates. LR cosine from
+   ``coarse.lr`` to ``train.lr_min``; held-out validation at the full rate (the
+   deployment criterion) every ``coarse.val_every`` epochs.
+2. ``coarse.finish_epochs`` paper epochs at the full rate (the Euler step's own error
+   and the fast input changes the coarse step averages), LR cosine from
+   ``coarse.finish_lr`` to ``train.lr_min``; validation every ``train.val_every`` steps
+   and at the last.
+
+One Adam state runs through every phase of a recipe.
 """
 
 from __future__ import annotations
@@ -38,11 +55,12 @@ from dataclasses import dataclass
 
 import torch
 
+from parknss.data.decimate import decimate, grid_length
 from parknss.data.trial import Trial
 from parknss.data.windows import make_windows
 from parknss.nss.batch import Batch, make_batch
 from parknss.nss.config import NSSConfig
-from parknss.nss.model import NSSModel
+from parknss.nss.model import INPUTS, NSSModel
 
 PERMUTATION_STRIDE = 1_000_003
 """Seed of pass p's permutation: train.seed · stride + p (distinct for p < stride)."""
@@ -59,8 +77,8 @@ def cosine(k: int, n: int, hi: float, lo: float) -> float:
 class Step:
     """What step k does: train on ``batch`` at ``lr``; validate first if ``validate``.
 
-    ``full``: a full-batch step (its training loss is the criterion of a fit without
-    held-out trials); ``phase``: "paper", "short" or "full".
+    ``full``: a full-batch step at the full rate (its training loss is the criterion of a
+    fit without held-out trials); ``phase``: "paper", "short", "coarse" or "full".
     """
 
     batch: Batch
@@ -124,13 +142,45 @@ class FastRecipe:
         return Step(self.full, lr, val, True, "full")
 
 
+class CoarseRecipe:
+    """Full-batch epochs at a coarse step, then a full-rate finish (module docstring)."""
+
+    name = "coarse"
+
+    def __init__(self, cfg: NSSConfig, full: Batch, coarse: Batch) -> None:
+        self.cfg, self.full, self.coarse = cfg, full, coarse
+        c = cfg.coarse
+        self.epochs, self.finish = c.epochs, c.finish_epochs
+        self.steps = self.epochs + self.finish
+
+    def step(self, k: int) -> Step:
+        c, t = self.cfg.coarse, self.cfg.train
+        if k <= self.epochs:
+            lr = cosine(k, self.epochs, c.lr, t.lr_min)
+            val = (k - 1) % c.val_every == 0 or k == self.steps  # the last, without a finish
+            return Step(self.coarse, lr, val, False, "coarse")
+        j = k - self.epochs
+        lr = cosine(j, self.finish, c.finish_lr, t.lr_min)
+        val = (j - 1) % t.val_every == 0 or k == self.steps
+        return Step(self.full, lr, val, True, "full")
+
+
+HELD_INPUTS: tuple[str, ...] = tuple(c for c in INPUTS if c != "gear")
+"""The inputs a coarse step averages over its samples (the gear is sampled)."""
+
+
 def make_recipe(
     cfg: NSSConfig, model: NSSModel, train: Sequence[Trial], L: int
-) -> PaperRecipe | FastRecipe:
+) -> PaperRecipe | FastRecipe | CoarseRecipe:
     """The recipe of ``cfg.train.recipe`` with its batches built for ``model``."""
     bz = cfg.loss.blind_zone_kmh
     full = make_batch(model, make_windows(train, L), bz)
     if cfg.train.recipe == "paper":
         return PaperRecipe(cfg, full)
+    if cfg.train.recipe == "coarse":
+        m = cfg.coarse.factor
+        dec = [decimate(t, m, HELD_INPUTS) for t in train]
+        coarse = make_batch(model, make_windows(dec, grid_length(L, m)), bz, stride=m)
+        return CoarseRecipe(cfg, full, coarse)
     short = make_batch(model, make_windows(train, cfg.fast.window), bz)
     return FastRecipe(cfg, full, short)

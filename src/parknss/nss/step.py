@@ -33,7 +33,7 @@ def epoch_loss(
 ) -> LossTerms:
     """Roll out every sequence of the batch and evaluate eq. 8; with ``share``, the batch is
     one shard of a larger one and the terms are its part of that batch's (losses module)."""
-    r = model.rollout(batch.x0, batch.u, engine=engine)
+    r = model.rollout(batch.x0, batch.u, engine=engine, stride=batch.stride)
     terms = nss_loss(r, batch.targets, cfg.loss, model.vx_zero_s(), model.st_sc[0], share)
     if cfg.loss.lambda_torque > 0.0:  # the torque-gain prior (opt-in; nss/losses.py)
         lt = torque_gain_loss(model, r, batch.u, batch.targets, cfg.loss, cfg.train.seed,
