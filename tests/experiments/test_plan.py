@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from helpers.experiments import tiny_setup
+from parknss.data.decimate import decimate, grid_length
 from parknss.data.windows import make_windows
 from parknss.errors import ConfigError
 from parknss.experiments.config import load_experiments_config
@@ -22,6 +23,7 @@ from parknss.experiments.plan import (
 from parknss.experiments.store import ResultStore, fit_key
 from parknss.experiments.sweep import Sweep, fold_spec
 from parknss.nss.campaigns import load_campaign
+from parknss.nss.recipes import HELD_INPUTS
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +74,15 @@ def test_fit_shapes_follow_recipe_engine_window_and_training_set(tiny):
     assert rk4.engine == ("rk4", "eager")
     fold = make_fold(camp, "cv", 0)
     train = [camp[i] for i in fold.train]
+    ov = {**base, "train": {"recipe": "coarse"}, "coarse": {"factor": 4, "epochs": 7,
+                                                             "finish_epochs": 3}}
+    coarse = fit_shape(fold_spec(sweep, "cv", 0, ov), camp)
+    assert (coarse.recipe, coarse.epochs, coarse.updates) == ("coarse", 3, 7)
+    assert coarse.phases == (("coarse", 7), ("full", 3)) and coarse.samples == paper.samples
+    L = min(t.n for t in train)  # what the coarse phase tiles: the decimated trials
+    dec = [decimate(t, 4, HELD_INPUTS) for t in train]
+    assert coarse.coarse_samples == make_windows(dec, grid_length(L, 4)).inputs.shape[0] * (
+        grid_length(L, 4))
     longest = max(t.n for t in train)
     for window, L in (("shortest", min(t.n for t in train)), (longest, longest)):
         ov = {**base, "data": {"window": window}}
@@ -105,6 +116,11 @@ def test_cost_arithmetic():
     assert rates.cost(fast, 20) == pytest.approx(20 * 3.0)
     assert rates.cost(fast, 45) == pytest.approx(40 * 3.0 + 5 * 4.0)
     assert rates.cost(fast, 10_000) == pytest.approx(rates.cost(fast))
+    # coarse: its epochs at the epoch rate scaled by their samples, then finish epochs
+    coarse = FitShape("nss", "coarse", FUSED, 10, 40, 1000, 125)
+    assert rates.cost(coarse) == pytest.approx(40 * 2.0 * 0.125 + 10 * 2.0)
+    assert rates.cost(coarse, 20) == pytest.approx(20 * 2.0 * 0.125)
+    assert rates.cost(coarse, 45) == pytest.approx(40 * 0.25 + 5 * 2.0)
 
 
 def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path):

@@ -263,6 +263,11 @@ def test_an_nss_fit_is_keyed_by_the_config_it_resolves_to(tmp_path):
     assert key({"train": {"epochs": 3000}}) != paper
     fast = key({"train": {"recipe": "fast"}})
     assert fast != paper and key({"train": {"recipe": "fast"}, "fast": {"batch": 7}}) != fast
+    assert key({"coarse": {"factor": 4}}) == paper  # a section its recipe does not read
+    assert key({"train": {"recipe": "fast"}, "coarse": {"factor": 4}}) == fast
+    coarse = key({"train": {"recipe": "coarse"}})
+    assert coarse not in (paper, fast)
+    assert key({"train": {"recipe": "coarse"}, "coarse": {"factor": 4}}) != coarse
 
 
 def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study, capsys):
@@ -278,21 +283,24 @@ def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study
     only = json.loads(capsys.readouterr().out)
     assert list(only["verdicts"].values()) == ["not measured"]
     assert len(entries(tmp_path / "results")) == stored
-    assert "2 of 4 fits" in (tmp_path / "s" / "report.html").read_text()
+    assert "4 of 6 fits" in (tmp_path / "s" / "report.html").read_text()
     assert main(["reproduce", "time_to_accuracy", *base, "--out", str(tmp_path / "b")]) == 0
     doc = json.loads(capsys.readouterr().out)
     # the paper recipe's fold fits are Table II's (same resolved config): read, not refitted
-    assert doc["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 2, "fitted": 2}
+    assert doc["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 2, "fitted": 4}
     assert "time_to_accuracy.png" in doc["files"]
     fast = [e for _, e in entries(tmp_path / "results")
             if not isinstance(e, str) and e.kwargs["nss"]["train"].get("recipe") == "fast"]
     assert len(fast) == 2 and all(e.result["recipe"] == "fast" for e in fast)
+    coarse = [e for _, e in entries(tmp_path / "results")
+              if not isinstance(e, str) and e.kwargs["nss"]["train"].get("recipe") == "coarse"]
+    assert len(coarse) == 2 and all(e.result["recipe"] == "coarse" for e in coarse)
     hist = fast[0].result["history"]
     assert len(hist["cpu_s"]) == len(hist["raw"]) and fast[0].result["cpu_s"] > 0.0
     assert main(["reproduce", "time_to_accuracy", *base, "--stored-only",
                  "--out", str(tmp_path / "t")]) == 0  # fmt: skip
     again = json.loads(capsys.readouterr().out)  # now the store holds it all
-    assert again["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 4, "fitted": 0}
+    assert again["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 6, "fitted": 0}
     assert "not measured" not in again["verdicts"].values()
     off = [*base[:-3], "--store", "off", "--stored-only", "--out", str(tmp_path / "u")]
     assert main(["reproduce", "time_to_accuracy", *off]) != 0
@@ -333,29 +341,39 @@ def test_a_fit_keeps_its_state_folder_under_any_spelling_and_loses_it_when_retun
 def test_time_to_accuracy_of_two_known_curves():
     from parknss.errors import DataError
     from parknss.experiments.sweep import FoldScore
-    from parknss.experiments.time_to_accuracy import Curve, FoldTTA, TTAResult
+    from parknss.experiments.time_to_accuracy import Challenger, Curve, FoldTTA, TTAResult
 
     def fit(cpu, smooth):
         return {"history": {"raw": smooth, "smooth": smooth, "cpu_s": cpu}, "cpu_s": cpu[-1]}
 
     paper = Curve.from_result(fit([100.0, 400.0, 800.0], [0.3, 0.2, 0.1]))
     fast = Curve.from_result(fit([10.0, 20.0, 50.0], [0.2, 0.1, 0.08]))
+    coarse = Curve.from_result(fit([5.0, 40.0, 100.0], [0.09, 0.2, 0.2]))
     score = FoldScore(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1, 12)
-    f = FoldTTA(0, paper, fast, score, score)
-    assert (f.target, f.reach_cpu_s) == (0.1, 20.0)  # the fast fit's first point at 0.1
-    assert (f.speedup_reach, f.speedup_total) == (40.0, 16.0)
-    assert TTAResult([f], 8.0).met() and not TTAResult([f], 50.0).met()
+    f = FoldTTA(0, paper, score, [Challenger("fast", fast, score),
+                                  Challenger("coarse", coarse, score)])
+    assert (f.target, f.reach_cpu_s("fast")) == (0.1, 20.0)  # the fast fit's first point at 0.1
+    assert (f.speedup_reach("fast"), f.speedup_total("fast")) == (40.0, 16.0)
+    assert (f.reach_cpu_s("coarse"), f.speedup_reach("coarse"), f.speedup_total("coarse")) == (
+        5.0, 160.0, 8.0)
+    assert TTAResult([f], 8.0).met() and TTAResult([f], 50.0).met()  # coarse: 160x
+    assert TTAResult([f], 50.0).met_by("coarse") and not TTAResult([f], 50.0).met_by("fast")
+    assert not TTAResult([f], 200.0).met()
     doc = f.to_json()
-    assert doc["paper"]["best"] == 0.1 and doc["fast"]["best"] == 0.08
-    assert doc["paper"]["best_cpu_s"] == 800.0
+    assert doc["paper"]["best"] == 0.1 and doc["challengers"]["fast"]["curve"]["best"] == 0.08
+    assert doc["paper"]["best_cpu_s"] == 800.0 and doc["challengers"]["coarse"]["reach_cpu_s"] == 5
+    assert TTAResult([f], 50.0).to_json()["met_by"] == ["coarse"]
+    rows = TTAResult([f], 8.0).rows()
+    assert [r[:2] for r in rows] == [["fold 0", "fast"], ["fold 0", "coarse"]]
     # a paper fit that peaks early: the speed-up is against its CPU time to its best
     early = Curve.from_result(fit([100.0, 400.0, 800.0], [0.3, 0.1, 0.2]))
-    e = FoldTTA(0, early, fast, score, score)
-    assert (early.best_cpu_s, e.reach_cpu_s) == (400.0, 20.0)
-    assert (e.speedup_reach, e.speedup_total) == (20.0, 16.0)
+    e = FoldTTA(0, early, score, [Challenger("fast", fast, score)])
+    assert (early.best_cpu_s, e.reach_cpu_s("fast")) == (400.0, 20.0)
+    assert (e.speedup_reach("fast"), e.speedup_total("fast")) == (20.0, 16.0)
     assert TTAResult([e], 20.0).met() and not TTAResult([e], 21.0).met()
-    slow = FoldTTA(0, fast, paper, score, score)  # the other way round: never reaches 0.08
-    assert slow.reach_cpu_s is None and not TTAResult([slow], 1.0).met()
+    slow = FoldTTA(0, fast, score, [Challenger("fast", paper, score)])  # never reaches 0.08
+    assert slow.reach_cpu_s("fast") is None and not TTAResult([slow], 1.0).met()
+    assert "not reached" in TTAResult([slow], 1.0).rows()[0][11]
     old = fit([10.0, 20.0], [0.2, 0.1])
     old["history"]["cpu_s"] = [None, None]
     with pytest.raises(DataError, match="no CPU times"):

@@ -13,10 +13,14 @@ trials,
     paper recipe:  epochs x s_epoch(engine) x S / S_ref
     fast recipe:   updates x s_update(engine)
                    + finish_epochs x s_epoch(engine) x S / S_ref
+    coarse recipe: coarse.epochs x s_epoch(engine) x S_m / S_ref
+                   + finish_epochs x s_epoch(engine) x S / S_ref
 
 with S the samples of one paper epoch (the training trials tiled into the fit's windows,
 padding included: ``sum ceil(n_i / L) x L``) and S_ref those of the fit the rates were
-timed on (CV fold 0); ``s_epoch(engine)`` per (integrator, engine) pair the plan holds
+timed on (CV fold 0), S_m those of the coarse phase's epoch (the trials decimated by
+``coarse.factor``: a coarse step costs what a full-rate step costs, and there are 1/m as
+many); ``s_epoch(engine)`` per (integrator, engine) pair the plan holds
 (fused Euler, eager Euler, midpoint, RK4), timed by paper-size fits of 1 and n epochs
 after a warm-up (the difference removes loading and the first validation: process CPU
 time, since the wall clock of a shared machine measures the neighbours), and
@@ -35,7 +39,8 @@ A fit that the store lacks but holds a parked state of (:mod:`parknss.experiment
 ``<store>/inflight/<store key>/``, at step s) costs what its remaining steps cost: a
 paper-recipe fit's epochs after s; a fast-recipe fit's steps are its updates and then its
 finish epochs, so a state at step s has done ``min(s, updates)`` updates and
-``clip(s - updates, 0, finish_epochs)`` finish epochs. A state in a run folder that was
+``clip(s - updates, 0, finish_epochs)`` finish epochs (a coarse fit likewise, its coarse
+epochs in the place of the updates). A state in a run folder that was
 not parked is not credited (run folders are scratch).
 """
 
@@ -125,8 +130,9 @@ def plan_rows(
 
 @dataclass(frozen=True)
 class FitShape:
-    """What a fit's cost depends on: model, recipe, engine class, step counts, samples
-    of one paper epoch (S in the module text)."""
+    """What a fit's cost depends on: model, recipe, engine class, step counts (``updates``:
+    the phase-1 steps of a fast or coarse fit; ``epochs``: the full-rate epochs), samples
+    of one paper epoch (S in the module text) and of one coarse epoch (S_m)."""
 
     model: str
     recipe: str = "paper"
@@ -134,14 +140,17 @@ class FitShape:
     epochs: int = 0
     updates: int = 0
     samples: int = 0
+    coarse_samples: int = 0
 
     @property
     def phases(self) -> tuple[tuple[str, int], ...]:
         """The recipe's phases in order, (name, steps), named as the fit's history rows
         name them (:mod:`parknss.nss.recipes`): paper epochs, or a fast fit's phase-1
-        updates ("short") then its finish epochs ("full")."""
-        if self.recipe == "fast":
-            return (("short", self.updates), ("full", self.epochs))
+        updates ("short") or a coarse fit's coarse epochs ("coarse"), then the finish
+        epochs ("full")."""
+        if self.recipe in ("fast", "coarse"):
+            return (("short" if self.recipe == "fast" else "coarse", self.updates),
+                    ("full", self.epochs))
         return (("paper", self.epochs),)
 
 
@@ -166,6 +175,14 @@ def fit_shape(job: Job, campaign) -> FitShape:
     if cfg.train.recipe == "fast":
         return FitShape(model, "fast", (integrator, engine), cfg.fast.finish_epochs,
                         cfg.fast.updates, samples)
+    if cfg.train.recipe == "coarse":
+        from parknss.data.decimate import grid_length
+
+        m = cfg.coarse.factor
+        Lm = grid_length(L, m)
+        coarse = sum(len(tile(grid_length(n, m), Lm)) * Lm for n in lengths)
+        return FitShape(model, "coarse", (integrator, engine), cfg.coarse.finish_epochs,
+                        cfg.coarse.epochs, samples, coarse)
     return FitShape(model, "paper", (integrator, engine), cfg.train.epochs, 0, samples)
 
 
@@ -200,8 +217,11 @@ class Rates:
         if step is not None:
             updates = min(max(step, 0), shape.updates)
             epochs = min(max(step - shape.updates, 0), shape.epochs)
-        return (updates * self.update_rate(shape.engine)
-                + epochs * self.epoch_rate(shape.engine) * scale)
+        if shape.recipe == "coarse":
+            per = self.epoch_rate(shape.engine) * shape.coarse_samples / max(self.ref_samples, 1)
+        else:
+            per = self.update_rate(shape.engine)
+        return updates * per + epochs * self.epoch_rate(shape.engine) * scale
 
 
 def paper_fit(integrator: str, engine: str, epochs: int) -> dict:

@@ -1,19 +1,23 @@
 """Time to accuracy of the training recipes: held-out error against CPU time, per CV fold.
 
-For each fold of the budget's ``tta_folds``, two fits of the NSS on the same split: the
-paper recipe (the Table II fold job itself, so the result store shares the fit) and the
-fast recipe (``train.recipe: fast``, :mod:`parknss.nss.recipes`). Each fit's history gives
-the held-out criterion (moving-region state loss of whole-trial open-loop rollouts, the
-value the best checkpoint is chosen on; raw and smoothed) at the fit's CPU time.
+For each fold of the budget's ``tta_folds``, fits of the NSS on the same split: the paper
+recipe (the Table II fold job itself, so the result store shares the fit) and each
+challenger recipe of the budget's ``tta_recipes`` (``fast``, ``coarse``:
+:mod:`parknss.nss.recipes`). Each fit's history gives the held-out criterion
+(moving-region state loss of whole-trial open-loop rollouts, the value the best
+checkpoint is chosen on; raw and smoothed) at the fit's CPU time.
 
 * target: the paper fit's best smoothed criterion (the error its final model was chosen
   at);
-* reach: the CPU time at which the fast fit's smoothed criterion first falls to the target
+* reach: the CPU time at which a challenger's smoothed criterion first falls to the target
   (None if it never does);
 * speed-ups: the paper fit's CPU time to its own best (the first point at its best smoothed
   criterion, not its total: a fit that peaks early is charged only what its best cost) /
-  fast CPU time to reach, and paper / fast total CPU time;
-* the Table II scores of both final models (vx, ω_z moving-region MSE) beside them.
+  the challenger's CPU time to reach, and paper / challenger total CPU time;
+* the Table II scores of the final models (vx, ω_z moving-region MSE) beside them.
+
+The goal (``tta_speedup``) is met when one challenger recipe reaches the target within
+1/``tta_speedup`` of the paper fit's CPU time to it on every fold.
 
 CPU time is the fit process's (``time.process_time``, one torch thread), so it does not
 depend on what else the machine runs; ratios are taken within one machine.
@@ -28,8 +32,6 @@ from parknss.errors import DataError
 from parknss.executor import Job
 from parknss.experiments.config import ExperimentsConfig, merge_overrides
 from parknss.experiments.sweep import FoldScore, Sweep, fold_spec
-
-FAST = {"train": {"recipe": "fast"}}
 
 
 @dataclass
@@ -69,45 +71,60 @@ class Curve:
 
 
 @dataclass
+class Challenger:
+    """One of this toolkit's recipes on a fold: its curve and the Table II scores of its
+    final model."""
+
+    recipe: str
+    curve: Curve
+    score: FoldScore
+
+
+@dataclass
 class FoldTTA:
-    """Both recipes on one fold."""
+    """The paper recipe and each challenger recipe on one fold."""
 
     index: int
     paper: Curve
-    fast: Curve
     paper_score: FoldScore
-    fast_score: FoldScore
+    challengers: list[Challenger]
 
     @property
     def target(self) -> float:
         return self.paper.best
 
-    @property
-    def reach_cpu_s(self) -> float | None:
-        return self.fast.reach(self.target)
+    def of(self, recipe: str) -> Challenger:
+        """The challenger fitted with ``recipe``."""
+        for c in self.challengers:
+            if c.recipe == recipe:
+                return c
+        raise KeyError(recipe)
 
-    @property
-    def speedup_reach(self) -> float:
-        """The paper fit's CPU time to its own best / the fast fit's CPU time to reach it."""
-        r = self.reach_cpu_s
+    def reach_cpu_s(self, recipe: str) -> float | None:
+        """CPU s at which ``recipe``'s fit first reaches the target (None: never)."""
+        return self.of(recipe).curve.reach(self.target)
+
+    def speedup_reach(self, recipe: str) -> float:
+        """The paper fit's CPU time to its own best / ``recipe``'s CPU time to reach it."""
+        r = self.reach_cpu_s(recipe)
         return self.paper.best_cpu_s / r if r else math.nan
 
-    @property
-    def speedup_total(self) -> float:
-        return self.paper.total_cpu_s / self.fast.total_cpu_s
+    def speedup_total(self, recipe: str) -> float:
+        return self.paper.total_cpu_s / self.of(recipe).curve.total_cpu_s
 
     def to_json(self) -> dict:
-        d = asdict(self)
-        d["paper"]["best"], d["fast"]["best"] = self.paper.best, self.fast.best
-        d["paper"]["best_cpu_s"], d["fast"]["best_cpu_s"] = (
-            self.paper.best_cpu_s, self.fast.best_cpu_s)
-        d.update(
-            target=self.target,
-            reach_cpu_s=self.reach_cpu_s,
-            speedup_reach=self.speedup_reach,
-            speedup_total=self.speedup_total,
-        )
-        return d
+        paper = asdict(self.paper) | {"best": self.paper.best, "best_cpu_s": self.paper.best_cpu_s}
+        out = {"index": self.index, "paper": paper, "paper_score": asdict(self.paper_score),
+               "target": self.target, "challengers": {}}
+        for c in self.challengers:
+            out["challengers"][c.recipe] = {
+                "curve": asdict(c.curve) | {"best": c.curve.best, "best_cpu_s": c.curve.best_cpu_s},
+                "score": asdict(c.score),
+                "reach_cpu_s": self.reach_cpu_s(c.recipe),
+                "speedup_reach": self.speedup_reach(c.recipe),
+                "speedup_total": self.speedup_total(c.recipe),
+            }
+        return out
 
 
 @dataclass
@@ -115,90 +132,102 @@ class TTAResult:
     folds: list[FoldTTA]
     required_speedup: float
 
+    @property
+    def recipes(self) -> list[str]:
+        return [c.recipe for c in self.folds[0].challengers] if self.folds else []
+
     def rows(self) -> list[list]:
         out = []
         for f in self.folds:
-            out.append(
-                [
-                    f"fold {f.index}",
-                    f.paper.total_cpu_s,
-                    f.paper.best_cpu_s,
-                    f.target,
-                    f.paper_score.vx,
-                    f.paper_score.yaw,
-                    f.fast.total_cpu_s,
-                    f.fast.best,
-                    f.fast_score.vx,
-                    f.fast_score.yaw,
-                    *(
-                        (f.reach_cpu_s, f.speedup_reach)
-                        if f.reach_cpu_s is not None
-                        else (f"not reached (best {f.fast.best / f.target - 1:+.0%})", "-")
-                    ),
-                    f.speedup_total,
-                ]
-            )
+            for c in f.challengers:
+                r = f.reach_cpu_s(c.recipe)
+                out.append(
+                    [
+                        f"fold {f.index}",
+                        c.recipe,
+                        f.paper.total_cpu_s,
+                        f.paper.best_cpu_s,
+                        f.target,
+                        f.paper_score.vx,
+                        f.paper_score.yaw,
+                        c.curve.total_cpu_s,
+                        c.curve.best,
+                        c.score.vx,
+                        c.score.yaw,
+                        *(
+                            (r, f.speedup_reach(c.recipe))
+                            if r is not None
+                            else (f"not reached (best {c.curve.best / f.target - 1:+.0%})", "-")
+                        ),
+                        f.speedup_total(c.recipe),
+                    ]
+                )
         return out
 
-    def met(self) -> bool:
-        """The fast recipe reached the paper's error on every fold within 1/required of the
-        paper fit's CPU time to that error."""
+    def met_by(self, recipe: str) -> bool:
+        """``recipe`` reached the paper's error on every fold within 1/required of the paper
+        fit's CPU time to that error."""
         return bool(self.folds) and all(
-            f.reach_cpu_s is not None and f.speedup_reach >= self.required_speedup
+            f.reach_cpu_s(recipe) is not None and f.speedup_reach(recipe) >= self.required_speedup
             for f in self.folds
         )
+
+    def met(self) -> bool:
+        """Some challenger recipe meets the goal on every fold."""
+        return any(self.met_by(r) for r in self.recipes)
 
     def to_json(self) -> dict:
         return {
             "folds": [f.to_json() for f in self.folds],
             "required_speedup": self.required_speedup,
             "met": self.met(),
+            "met_by": [r for r in self.recipes if self.met_by(r)],
         }
 
 
 COLUMNS = [
     "",
+    "recipe",
     "paper CPU [s]",
     "paper CPU to best [s]",
     "paper criterion",
     "paper vx",
     "paper ω_z",
-    "fast CPU [s]",
-    "fast criterion",
-    "fast vx",
-    "fast ω_z",
-    "fast reaches at [s]",
+    "CPU [s]",
+    "criterion",
+    "vx",
+    "ω_z",
+    "reaches the paper's best at [s]",
     "speed-up (reach)",
     "speed-up (total)",
 ]
 
 
 def tta_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
-    """Paper and fast recipe fits of every fold of the budget's ``tta_folds``, in pairs
-    (the paper one is that fold's Table II NSS fit)."""
+    """Per fold of the budget's ``tta_folds``: the paper recipe's fit (that fold's Table
+    II NSS fit) and one fit of each recipe of the budget's ``tta_recipes``."""
     b = cfg.budget(quick)
     paper_ov = b.deployment_overrides()
     jobs = []
     for i in b.tta_folds:
         jobs.append(fold_spec(sweep, "cv", i, paper_ov, name=f"paper recipe fold {i}"))
-        jobs.append(
-            fold_spec(sweep, "cv", i, merge_overrides(paper_ov, FAST), name=f"fast recipe fold {i}")
-        )
+        for recipe in b.tta_recipes:
+            ov = merge_overrides(paper_ov, {"train": {"recipe": recipe}})
+            jobs.append(fold_spec(sweep, "cv", i, ov, name=f"{recipe} recipe fold {i}"))
     return jobs
 
 
 def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTAResult:
-    """Fit both recipes on every fold of the budget's ``tta_folds`` (CV split)."""
+    """Fit every recipe on every fold of the budget's ``tta_folds`` (CV split)."""
     b = cfg.budget(quick)
     res = sweep.run(tta_jobs(cfg, quick, sweep), "time to accuracy")
-    folds = [
-        FoldTTA(
-            i,
-            Curve.from_result(p),
-            Curve.from_result(f),
-            FoldScore.from_json(p),
-            FoldScore.from_json(f),
-        )
-        for i, p, f in zip(b.tta_folds, res[0::2], res[1::2], strict=True)
-    ]
+    per = 1 + len(b.tta_recipes)
+    folds = []
+    for j, i in enumerate(b.tta_folds):
+        p, *others = res[j * per : (j + 1) * per]
+        folds.append(FoldTTA(
+            i, Curve.from_result(p), FoldScore.from_json(p),
+            [Challenger(r, Curve.from_result(o), FoldScore.from_json(o))
+             for r, o in zip(b.tta_recipes, others, strict=True)],
+        ))
     return TTAResult(folds, cfg.tta_speedup)

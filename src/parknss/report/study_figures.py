@@ -108,24 +108,29 @@ def draw_limiter(result, path: str | Path) -> Path:
 
 
 def draw_time_to_accuracy(result, path: str | Path) -> Path:
-    """Held-out criterion against the fit's CPU time, paper (C0) and fast (C1) recipe, one
-    panel per fold: raw points (light), smoothed line, the paper fit's best smoothed
-    error, the target (dotted), and where the fast recipe reaches it (vertical)."""
+    """Held-out criterion against the fit's CPU time, the paper recipe (C0) and each
+    challenger recipe (C1, C2, ...), one panel per fold: raw points (light), smoothed line,
+    the paper fit's best smoothed error, the target (dotted), and where each challenger
+    reaches it (vertical)."""
     n = len(result.folds)
     fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.8), squeeze=False,
                              constrained_layout=True)
     for ax, f in zip(axes[0], result.folds, strict=True):
-        for curve, color, label in ((f.paper, "C0", "paper"), (f.fast, "C1", "fast")):
+        runs = [(f.paper, "C0", "paper")] + [
+            (c.curve, f"C{j}", c.recipe) for j, c in enumerate(f.challengers, 1)]
+        for curve, color, label in runs:
             ax.plot(curve.cpu_s, curve.raw, ".", color=color, alpha=0.2, ms=2)
             ax.plot(curve.cpu_s, curve.smooth, "-", color=color,
                     label=f"{label} ({curve.total_cpu_s:.0f} s)")
         ax.axhline(f.target, color="k", ls=":", lw=1, label=f"paper best {f.target:.4f}")
-        if f.reach_cpu_s is not None:
-            ax.axvline(f.reach_cpu_s, color="C1", ls="--", lw=1,
-                       label=f"reached at {f.reach_cpu_s:.0f} s (x{f.speedup_reach:.1f})")
+        for j, c in enumerate(f.challengers, 1):
+            r = f.reach_cpu_s(c.recipe)
+            if r is not None:
+                ax.axvline(r, color=f"C{j}", ls="--", lw=1, label=f"{c.recipe} reaches it at "
+                           f"{r:.0f} s (x{f.speedup_reach(c.recipe):.1f})")
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
-        lo = min(min(f.paper.smooth), min(f.fast.smooth))
+        lo = min(min(curve.smooth) for curve, _, _ in runs)
         ax.set_ylim(0.9 * lo, 3.0 * lo)
         ax.set_xlabel("CPU time of the fit [s]")
         if ax is axes[0][0]:
@@ -133,5 +138,5 @@ def draw_time_to_accuracy(result, path: str | Path) -> Path:
         ax.set_title(f"CV fold {f.index}", fontsize=10)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
-    fig.suptitle("Time to accuracy: paper recipe vs fast recipe")
+    fig.suptitle("Time to accuracy: the paper recipe vs this toolkit's recipes")
     return save(fig, path)
