@@ -42,14 +42,17 @@ def env(tmp_path_factory):
 
 
 def _args(env, out, *extra):
+    """A tiny paper-recipe run (``--recipe`` in ``extra`` replaces it)."""
     sets = [x for s in NSS_SET for x in ("--set", s)]
+    recipe = [] if "--recipe" in extra else ["--recipe", "paper"]
     return ["identify", "--data", str(env / "data"), "--out", str(out), "--actuator-config",
-            str(env / "act.yaml"), "--stages", STAGES, *sets, *extra]
+            str(env / "act.yaml"), "--stages", STAGES, *sets, *recipe, *extra]
 
 
 def _inputs(env, out, **kw):
     from parknss.nss.config import cli_overrides
 
+    kw.setdefault("recipe", "paper")
     return IdentifyInputs(out=out, data=env / "data", actuator_config=env / "act.yaml",
                           stages=tuple(STAGES.split(",")), nss_overrides=cli_overrides(NSS_SET),
                           **kw)
@@ -86,6 +89,22 @@ def test_pipeline_writes_the_chain_and_the_card(car):
 
 
 @pytest.mark.slow
+def test_the_default_recipe_is_the_coarse_one(env, tmp_path, capsys):
+    """No --recipe: the NSS is fitted with train.recipe coarse (its own section read)."""
+    from parknss.experiments.identify.config import IdentifyConfig, load_identify_config
+
+    assert IdentifyConfig().recipe == load_identify_config(None).recipe == "coarse"
+    out = tmp_path / "car"
+    coarse = ["coarse.factor=4", "coarse.epochs=3", "coarse.val_every=2", "coarse.finish_epochs=2"]
+    sets = [x for s in [*NSS_SET, *coarse] for x in ("--set", s)]
+    assert main(["identify", "--data", str(env / "data"), "--out", str(out), "--stages",
+                 "data,nss", *sets, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["recipe"] == "coarse"
+    meta = json.loads((out / "nss" / "model" / "model.json").read_text())
+    text = json.dumps(meta)
+    assert '"recipe": "coarse"' in text and '"factor": 4' in text
+
+
 def test_phase_a_fitted_beside_the_nss_gives_the_same_chain(env, car, tmp_path, monkeypatch):
     """With --workers 2 the actuator study's Phase A runs in a background process while the
     NSS fits (here the fit waits until two Phase A fits are cached, so the overlap is
@@ -356,6 +375,14 @@ def test_config_mismatch_rules():
     assert "train.recipe" in config_mismatch(rec, {**want, "train": {**want["train"],
                                                                      "recipe": "fast"}})
     assert "state_units" in config_mismatch(rec, {**want, "model": {"state_units": 64}})
+    # a fast model from before the coarse recipe: the coarse section is inert for it
+    fast = {"train": {"recipe": "fast"}, "fast": {"updates": 2000}}
+    assert config_mismatch(fast, {**fast, "coarse": {"factor": 16}}) is None
+    assert "fast.updates" in config_mismatch(fast, {**fast, "fast": {"updates": 10}})
+    coarse = {"train": {"recipe": "coarse"}, "coarse": {"factor": 16}}
+    assert config_mismatch(coarse, {**coarse, "fast": {"updates": 2000}}) is None
+    assert "coarse.factor" in config_mismatch(
+        {"train": {"recipe": "coarse"}}, {**coarse})  # its own section must be recorded
 
 
 def test_from_a_folder_of_logs(env, tmp_path, capsys):

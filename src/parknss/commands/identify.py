@@ -3,7 +3,7 @@
 
 ``parknss identify LOGS --mapping M.yaml --out CAR`` (or ``--data CAMPAIGN``) imports and
 describes the campaign (refused early in one line unless it supports every workflow),
-fits the NSS (``--recipe paper|fast``; ``--nss DIR`` reuses a fitted one whose data hash
+fits the NSS (``--recipe paper|fast|coarse``; ``--nss DIR`` reuses a fitted one whose data hash
 and training config match), selects and builds the actuator chain, rates it, tunes the
 interface gains, runs the closed-loop grid of the car's geometry, the fidelity against
 the truth where one exists, the exports, and writes CAR/model_card.html and .json. A rerun
@@ -30,7 +30,8 @@ def register(app: typer.Typer) -> None:
         mapping: Path | None = typer.Option(None, "--mapping", help="Channel-mapping YAML."),
         data: Path | None = typer.Option(None, "--data", help="An imported campaign instead."),
         recipe: str | None = typer.Option(
-            None, "--recipe", help="NSS recipe: paper (default) or fast (~1/7.5 the CPU)."),
+            None, "--recipe", help="NSS recipe: coarse (default: coarse-step epochs, then a "
+            "full-rate finish; ~1/7 the CPU of paper), paper (3200 epochs) or fast."),
         set_: list[str] = typer.Option(None, "--set", help="NSS section.field=value."),
         nss: Path | None = typer.Option(
             None, "--nss", help="Fitted NSS to reuse if its data hash and config match."),

@@ -15,7 +15,7 @@ STAGES: tuple[str, ...] = (
 )
 """The stages of the pipeline, in order (docs/identify.md)."""
 
-RECIPES: tuple[str, ...] = ("paper", "fast")
+RECIPES: tuple[str, ...] = ("paper", "fast", "coarse")
 
 
 class StageEstimates(StrictModel):
@@ -24,6 +24,7 @@ class StageEstimates(StrictModel):
     data: float = Field(10.0, ge=0)
     nss_paper_epoch: float = Field(2.2, ge=0, description="s per paper-recipe epoch")
     nss_fast: float = Field(950.0, ge=0, description="s for the whole fast recipe")
+    nss_coarse: float = Field(950.0, ge=0, description="s for the whole coarse recipe")
     selection: float = Field(1200.0, ge=0)
     chain: float = Field(300.0, ge=0)
     rating: float = Field(60.0, ge=0)
@@ -37,7 +38,7 @@ class StageEstimates(StrictModel):
 class IdentifyConfig(StrictModel):
     """What ``parknss identify`` runs when no option says otherwise."""
 
-    recipe: Literal["paper", "fast"] = "paper"
+    recipe: Literal["paper", "fast", "coarse"] = "coarse"
     grid: Literal["36", "12", "252"] = "36"
     grid_cells: str | None = None
     tune_rounds: int = Field(1, ge=1)
@@ -61,7 +62,7 @@ class IdentifyInputs:
         logs: a folder of logs to import (with ``mapping``), or None with ``data``.
         mapping: the channel-mapping YAML of the import.
         data: an already-imported campaign folder (instead of ``logs``).
-        recipe: "paper" or "fast" (None: the config's).
+        recipe: "paper", "fast" or "coarse" (None: the config's).
         nss_overrides: NSS config overrides {section: {field: value}} (``--set``).
         nss: a fitted NSS folder to start from (reused only when its data hash and
             training config equal this run's; see :mod:`.reuse`).

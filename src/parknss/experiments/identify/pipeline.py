@@ -113,7 +113,8 @@ class Pipeline:
     def estimates(self, wanted: tuple[str, ...]) -> dict[str, float]:
         e = self.cfg.estimate_s
         cfg = self.nss_config()
-        nss = (e.nss_paper_epoch * cfg.train.epochs if self.recipe == "paper" else e.nss_fast)
+        nss = {"paper": e.nss_paper_epoch * cfg.train.epochs, "fast": e.nss_fast,
+               "coarse": e.nss_coarse}[self.recipe]
         if self.inp.nss is not None:
             nss = 5.0
         table = {s: getattr(e, s, 0.0) for s in STAGES if s != "nss"}

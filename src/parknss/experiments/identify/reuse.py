@@ -4,12 +4,12 @@
   when the campaign's data hash equals the one recorded in the model and every training
   setting recorded in the model equals this run's resolved NSS config (a setting the model
   does not record is accepted only when it belongs to a recipe the fit did not use: the
-  ``fast`` section under the paper recipe, and ``train.recipe: paper`` for a model from
-  before recipes existed). A mismatch is refused in one line naming the field; nothing is
-  reused then. The training-code version is checked too: the model's recorded
-  ``code_version``, else the version of the code at its recorded git revision (from the
-  checkout's git history); it must be the current version or one the canary lineage
-  (``results/lineage``) records as computing the same numbers. A version that is not
+  ``fast`` or ``coarse`` section of a fit made with another recipe, and ``train.recipe:
+  paper`` for a model from before recipes existed). A mismatch is refused in one line
+  naming the field; nothing is reused then. The training-code version is checked too:
+  the model's recorded ``code_version``, else the version of the code at its recorded git
+  revision (from the checkout's git history); it must be the current version or one the
+  canary lineage (``results/lineage``) records as computing the same numbers. A version that is not
   shown equal is refused unless ``allow_code_change`` (``--allow-code-change``), and the
   model card then says so.
 * **An actuator selection** (``--selection``, :func:`selection_winners`): the winners of a
@@ -28,9 +28,7 @@ from parknss.config import CONFIG_DIR, REPO_ROOT, read_json
 from parknss.errors import ConfigError, ParknssError
 from parknss.experiments.lineage import accepted_versions
 from parknss.experiments.store import code_version, revision_code_version
-
-PAPER_INERT = ("fast.",)
-"""Config fields a paper-recipe fit never reads (the fast recipe's section)."""
+from parknss.nss.config import RECIPE_SECTIONS
 
 
 class ReuseRefusedError(ParknssError):
@@ -58,8 +56,9 @@ def config_mismatch(recorded: dict, wanted: dict) -> str | None:
             if rec[key] != want[key]:
                 return f"{key} is {rec[key]!r} in the model, {want[key]!r} here"
         elif key in want:
-            inert = (key == "train.recipe" and want[key] == "paper") or (
-                recipe == "paper" and key.startswith(PAPER_INERT))
+            inert = (key == "train.recipe" and want[key] == "paper") or any(
+                key.startswith(f"{section}.") and recipe != other
+                for other, section in RECIPE_SECTIONS.items())
             if not inert:
                 return f"{key} is not recorded in the model ({want[key]!r} here)"
         else:
