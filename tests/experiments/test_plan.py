@@ -46,7 +46,7 @@ def test_the_plan_is_the_studies_own_jobs_and_shared_fits_meet(tiny):
     assert len(jobs["seed-noise"]) == len(b.seeds)
     assert len(jobs["limiter"]) == len(b.folds)
     assert len(jobs["learning-curve"]) == len(cfg.learning_curve_rs) * len(b.folds)
-    assert len(jobs["time_to_accuracy"]) == 2 * len(b.tta_folds)
+    assert len(jobs["time_to_accuracy"]) == (1 + len(b.tta_recipes)) * len(b.tta_folds)
     assert len(jobs["table2"]) == 12  # nss, direct yaw, linear x 4 folds
     # Fig. 4's fit is the fold-0 Table II NSS fit and the fold-0 TTA paper fit
     (conv,) = _ids(jobs["convergence"])
@@ -144,7 +144,7 @@ def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path
     assert before.total.cpu_h - after.total.cpu_h == pytest.approx(
         after.rates.cost(shape) / 3600.0)
     assert by["convergence"].cpu_h == 0.0
-    assert after.total.recipes == {"paper": 8, "fast": 2, "linear": 4}
+    assert after.total.recipes == {"paper": 8, "fast": 2, "coarse": 2, "linear": 4}
 
 
 def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):

@@ -13,6 +13,7 @@ TINY_NET = {
     "model": {"state_layers": 1, "state_units": 4, "output_layers": 1, "output_units": 4},
     "train": {"val_every": 1, "smooth_window": 1},
     "fast": {"window": 40, "batch": 4, "updates": 6, "val_every": 2, "finish_epochs": 2},
+    "coarse": {"factor": 4, "epochs": 6, "val_every": 2, "finish_epochs": 2},
 }
 
 TINY_CONFIG = {
