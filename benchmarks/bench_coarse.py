@@ -26,8 +26,8 @@ import torch
 
 from parknss.data.io import read_campaign
 from parknss.data.normalize import Normalizer
-from parknss.data.splits import stratified_folds
 from parknss.data.windows import whole_trials, window_length
+from parknss.experiments.folds import make_fold
 from parknss.nss.batch import make_batch
 from parknss.nss.config import load_nss_config, with_overrides
 from parknss.nss.model import NORMALIZED
@@ -49,10 +49,8 @@ def main() -> None:
     torch.set_num_threads(1)
     factors = [int(f) for f in args.factors.split(",")]
     camp = read_campaign(args.data)
-    fold = stratified_folds(camp)[args.fold]
-    by_id = {t.id: t for t in camp}
-    train = [by_id[i] for i in fold.train]
-    val = [by_id[i] for i in fold.val]
+    fold = make_fold(camp, "cv", args.fold)  # the fold job's own split
+    train, val = [camp[i] for i in fold.train], [camp[i] for i in fold.val]
     base = load_nss_config()
     norm = Normalizer.fit(train, NORMALIZED, base.data.normalizer, base.data.clip_percentiles)
     model = build_model(base, norm, geometry_of(camp))

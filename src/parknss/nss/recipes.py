@@ -104,6 +104,15 @@ class PaperRecipe:
         return Step(self.full, lr, val, True, "paper")
 
 
+def finish_step(cfg: NSSConfig, full: Batch, j: int, n: int, lr0: float) -> Step:
+    """Step j (1-based) of an n-epoch full-rate finish on ``full`` (the paper's windows):
+    LR cosine from ``lr0`` to ``train.lr_min``, validation every ``train.val_every`` and
+    at the last."""
+    t = cfg.train
+    val = (j - 1) % t.val_every == 0 or j == n
+    return Step(full, cosine(j, n, lr0, t.lr_min), val, True, "full")
+
+
 class FastRecipe:
     """Minibatches of short windows, then a full-window finish (module docstring)."""
 
@@ -136,10 +145,7 @@ class FastRecipe:
         if k <= self.updates:
             lr = cosine(k, self.updates, f.lr, t.lr_min)
             return Step(self.minibatch(k), lr, (k - 1) % f.val_every == 0, False, "short")
-        j = k - self.updates
-        lr = cosine(j, self.finish, f.finish_lr, t.lr_min)
-        val = (j - 1) % t.val_every == 0 or k == self.steps
-        return Step(self.full, lr, val, True, "full")
+        return finish_step(self.cfg, self.full, k - self.updates, self.finish, f.finish_lr)
 
 
 class CoarseRecipe:
@@ -159,10 +165,7 @@ class CoarseRecipe:
             lr = cosine(k, self.epochs, c.lr, t.lr_min)
             val = (k - 1) % c.val_every == 0 or k == self.steps  # the last, without a finish
             return Step(self.coarse, lr, val, False, "coarse")
-        j = k - self.epochs
-        lr = cosine(j, self.finish, c.finish_lr, t.lr_min)
-        val = (j - 1) % t.val_every == 0 or k == self.steps
-        return Step(self.full, lr, val, True, "full")
+        return finish_step(self.cfg, self.full, k - self.epochs, self.finish, c.finish_lr)
 
 
 HELD_INPUTS: tuple[str, ...] = tuple(c for c in INPUTS if c != "gear")
