@@ -213,15 +213,16 @@ class Rates:
         if shape.model != "nss":
             return 0.0
         scale = shape.samples / self.ref_samples if self.ref_samples else 1.0
+        epoch = self.epoch_rate(shape.engine) * scale  # s per full-rate epoch of this fit
         updates, epochs = shape.updates, shape.epochs
         if step is not None:
             updates = min(max(step, 0), shape.updates)
             epochs = min(max(step - shape.updates, 0), shape.epochs)
-        if shape.recipe == "coarse":
-            per = self.epoch_rate(shape.engine) * shape.coarse_samples / max(self.ref_samples, 1)
+        if shape.recipe == "coarse":  # a coarse epoch: the full one scaled by its samples
+            per = epoch * shape.coarse_samples / shape.samples if shape.samples else 0.0
         else:
             per = self.update_rate(shape.engine)
-        return updates * per + epochs * self.epoch_rate(shape.engine) * scale
+        return updates * per + epochs * epoch
 
 
 def paper_fit(integrator: str, engine: str, epochs: int) -> dict:

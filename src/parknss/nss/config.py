@@ -162,8 +162,9 @@ class TrainConfig(StrictModel):
 FAST_IGNORES: tuple[str, ...] = ("epochs", "lr", "schedule")
 """Fields of the train section the fast and coarse recipes do not read (they have their own)."""
 
-RECIPE_SECTIONS: dict[str, str] = {"fast": "fast", "coarse": "coarse"}
-"""The config section each non-paper recipe reads (a fit names only its own)."""
+RECIPE_SECTIONS: tuple[str, ...] = ("fast", "coarse")
+"""The non-paper recipes; each reads the config section of its name (a fit names only its
+own)."""
 
 
 class FastConfig(StrictModel):
@@ -298,8 +299,8 @@ def fit_identity(cfg: NSSConfig) -> dict:
     else:
         for k in FAST_IGNORES:
             doc["train"].pop(k, None)
-    for recipe, section in RECIPE_SECTIONS.items():  # only the fit's own recipe section
-        if cfg.train.recipe != recipe:
+    for section in RECIPE_SECTIONS:  # only the fit's own recipe section
+        if cfg.train.recipe != section:
             doc.pop(section, None)
     return doc
 

@@ -57,8 +57,8 @@ def config_mismatch(recorded: dict, wanted: dict) -> str | None:
                 return f"{key} is {rec[key]!r} in the model, {want[key]!r} here"
         elif key in want:
             inert = (key == "train.recipe" and want[key] == "paper") or any(
-                key.startswith(f"{section}.") and recipe != other
-                for other, section in RECIPE_SECTIONS.items())
+                key.startswith(f"{section}.") and recipe != section
+                for section in RECIPE_SECTIONS)
             if not inert:
                 return f"{key} is not recorded in the model ({want[key]!r} here)"
         else:
