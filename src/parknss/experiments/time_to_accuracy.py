@@ -65,6 +65,10 @@ class Curve:
         """CPU time (s) of the first point at the best smoothed criterion."""
         return self.cpu_s[self.smooth.index(self.best)]
 
+    def to_json(self) -> dict:
+        """The curve with its best smoothed criterion and the CPU time it was first at."""
+        return asdict(self) | {"best": self.best, "best_cpu_s": self.best_cpu_s}
+
     def reach(self, target: float) -> float | None:
         """CPU time (s) of the first point whose smoothed criterion is <= target."""
         return next((c for c, s in zip(self.cpu_s, self.smooth, strict=True) if s <= target), None)
@@ -113,12 +117,12 @@ class FoldTTA:
         return self.paper.total_cpu_s / self.of(recipe).curve.total_cpu_s
 
     def to_json(self) -> dict:
-        paper = asdict(self.paper) | {"best": self.paper.best, "best_cpu_s": self.paper.best_cpu_s}
-        out = {"index": self.index, "paper": paper, "paper_score": asdict(self.paper_score),
-               "target": self.target, "challengers": {}}
+        out = {"index": self.index, "paper": self.paper.to_json(),
+               "paper_score": asdict(self.paper_score), "target": self.target,
+               "challengers": {}}
         for c in self.challengers:
             out["challengers"][c.recipe] = {
-                "curve": asdict(c.curve) | {"best": c.curve.best, "best_cpu_s": c.curve.best_cpu_s},
+                "curve": c.curve.to_json(),
                 "score": asdict(c.score),
                 "reach_cpu_s": self.reach_cpu_s(c.recipe),
                 "speedup_reach": self.speedup_reach(c.recipe),
