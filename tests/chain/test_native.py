@@ -15,9 +15,10 @@ from helpers.actuators import tiny_config, tiny_nss
 from parknss.actuators.envelopes import identify_envelope
 from parknss.actuators.fit import fit_candidate
 from parknss.actuators.spec import CandidateSpec
+from parknss.cbuild import CFLAGS
 from parknss.chain import DeployedChain
 from parknss.chain.deployed import step_many
-from parknss.chain.native import CFLAGS, NativeChain
+from parknss.chain.native import NativeChain
 from parknss.chain.native import step_many as native_step_many
 from parknss.chain.score import make_chain
 from parknss.errors import ConfigError, ParknssError

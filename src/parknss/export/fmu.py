@@ -33,9 +33,9 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from parknss import __version__
+from parknss.cbuild import build_shared
 from parknss.chain.ccode import chain_c_source
 from parknss.chain.deployed import DeployedChain, load_chain
-from parknss.chain.native import build_shared
 from parknss.config import SHIPPED_PLANT
 from parknss.errors import ParknssError
 from parknss.export.config import FmuConfig, load_export_config
