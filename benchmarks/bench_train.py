@@ -1,4 +1,4 @@
-"""Benchmark: one NSS training epoch at paper size, plain eager loop vs the fused path.
+"""Benchmark: one NSS training epoch at paper size, plain eager loop vs the fused engines.
 
     python benchmarks/bench_train.py [--data DIR] [--windows 29] [--length 2121]
                                      [--repeats 3] [--threads 1]
@@ -16,24 +16,28 @@ readout + output net + loss + backward + Adam step, timed for
 * fast: the fused engine with ``model.fused_kernels: fast`` (the same functions by
   cheaper kernels, rounded differently: tanh(a) = 2·σ(2a) - 1 with the affine 2s - 1
   folded into the next layer's weights, two kernels a layer and step; skinny products
-  reordered),
+  reordered), and
+* native: ``model.fused_kernels: native`` (the per-step loops, their derivatives, the
+  hidden layers' weight gradients and the output network in C compiled for this machine,
+  parknss.nss.fused_native; the warm-up epoch builds or loads the library),
 
 with identical initial weights, data and loss code, in the same run, interleaved epoch by
-epoch, with one intra-op thread. Readout, output network and loss are the same code in
-all (applied to the whole stacked trajectory). Prints the seconds per epoch of each
-(best and median of ``--repeats`` after one warm-up epoch), the loss of every epoch of
-all (they train identically up to float32 rounding), the ratio eager / fused of the
-best times and, last, the median and range of the ratios of paired (back-to-back) epochs
-of eager and each fused variant, in wall seconds and in CPU seconds
+epoch, with one intra-op thread. Readout and loss are the same code in all (applied to
+the whole stacked trajectory). Prints the seconds per epoch of each (best and median of
+``--repeats`` after one warm-up epoch), the loss of every epoch of all (they train
+identically up to float32 rounding), the ratio eager / each of the best times and, last,
+the median and range of the ratios of paired (back-to-back) epochs of eager and each
+fused variant, in wall seconds and in CPU seconds
 (``time.process_time``: on a loaded machine the wall time of an epoch counts the other
 processes' turns, its CPU time much less so).
 
-Last, the arithmetic floor: the multiply-adds of one epoch's matrix products (counted from
-the shapes: the state net's forward, reverse-time and weight-gradient products, the output
-net's three passes), timed at the GEMM rates this machine gives in the same run (the
+Last, the arithmetic: the multiply-adds of one epoch's matrix products (counted from the
+shapes: the state net's forward, reverse-time and weight-gradient products, the output
+net's three passes), timed at torch's GEMM rates on this machine in the same run (the
 per-step B x H x H product for the two recurrences, the stacked (B·T) x H x H product for
-the rest), and the best ratio eager / fused any engine could reach with nothing but those
-products. The load average before and after is printed too (the machine may be shared).
+the rest): the best ratio eager / fused an engine built on torch's products could reach
+with nothing but them (the native kernels run their own products, faster than these).
+The load average before and after is printed too (the machine may be shared).
 """
 
 from __future__ import annotations
@@ -150,12 +154,13 @@ def main() -> None:
         f"{m.state_layers}x{m.state_units}, output net {m.output_layers}x{m.output_units}, "
         f"{torch.get_num_threads()} thread(s), torch {torch.__version__}"
     )
-    fast = with_overrides(cfg, model={"fused_kernels": "fast"})
     runners = {
         "eager": Runner(cfg, norm, geom, batch, "eager"),
         "fused": Runner(cfg, norm, geom, batch, "fused"),
-        "fast": Runner(fast, norm, geom, batch, "fused"),
     }
+    for kernels in ("fast", "native"):
+        kcfg = with_overrides(cfg, model={"fused_kernels": kernels})
+        runners[kernels] = Runner(kcfg, norm, geom, batch, "fused")
     for r in runners.values():
         r.epoch(record=False)  # warm-up (TorchScript profiling, buffer allocation)
     for _ in range(a.repeats):  # interleaved, so both see the same machine load
@@ -166,13 +171,14 @@ def main() -> None:
         best[e] = min(r.times)
         losses = ", ".join(f"{v:.7f}" for v in r.losses)
         print(
-            f"{e:>5}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
+            f"{e:>6}: best {best[e]:.3f} s/epoch, median {statistics.median(r.times):.3f} s/epoch "
             f"(CPU best {min(r.cpu):.3f} s) over {len(r.times)} epochs; losses {losses}"
         )
-    for name in ("fused", "fast"):
+    fused = [name for name in runners if name != "eager"]
+    for name in fused:
         print(f"speedup eager/{name}: {best['eager'] / best[name]:.2f}x")
     for clock in ("times", "cpu"):
-        for name in ("fused", "fast"):
+        for name in fused:
             eager, other = getattr(runners["eager"], clock), getattr(runners[name], clock)
             paired = [e / f for e, f in zip(eager, other, strict=True)]
             print(f"paired epochs eager/{name} ({'wall' if clock == 'times' else 'CPU'}): median "
@@ -183,10 +189,10 @@ def main() -> None:
     small = gemm_rate(batch.n, m.state_units, dtype, 4000)
     big = gemm_rate(batch.n * batch.steps, m.state_units, dtype, 5)
     floor = rec / small + rest / big
-    print(f"arithmetic floor: {(rec + rest) / 1e9:.1f} G multiply-adds an epoch "
-          f"({rec / 1e9:.1f} G in the per-step products at {small / 1e9:.0f} G/s, "
+    print(f"arithmetic: {(rec + rest) / 1e9:.1f} G multiply-adds an epoch "
+          f"({rec / 1e9:.1f} G in the per-step products at torch's {small / 1e9:.0f} G/s, "
           f"{rest / 1e9:.1f} G stacked at {big / 1e9:.0f} G/s): {floor:.3f} CPU s; "
-          f"eager CPU best / floor {min(runners['eager'].cpu) / floor:.2f}x")
+          f"eager CPU best / that {min(runners['eager'].cpu) / floor:.2f}x")
     print(f"load average (1 min) {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
           f"{os.cpu_count()} CPUs")
 

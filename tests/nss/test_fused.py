@@ -7,6 +7,7 @@ import functools
 import pytest
 import torch
 
+from helpers.fused import euler_args, euler_reference, mlp_args, mlp_reference
 from helpers.synth import make_campaign, tiny_model
 from parknss.data.windows import whole_trials
 from parknss.nss.fused import KERNELS, FusedEulerRollout, euler_forward
@@ -14,49 +15,22 @@ from parknss.nss.fused_mlp import FusedTanhMLP
 from parknss.nss.workspace import WORKSPACE
 
 F64 = torch.float64
+TORCH_KERNELS = [k for k in KERNELS if k != "native"]  # float64 too (native: float32 only,
+# tests/nss/test_fused_native.py)
 
 
-def _rand(*shape, scale=0.5, gen):
-    return (torch.randn(*shape, generator=gen, dtype=F64) * scale).requires_grad_(True)
-
-
-def _euler_args(B=2, T=6, H=4, m=4, hidden_layers=1, seed=0):
-    g = torch.Generator().manual_seed(seed)
-    x0 = _rand(B, 2, gen=g)
-    U = _rand(T - 1, B, m, gen=g)
-    W0, b0 = _rand(H, 2 + m, gen=g), _rand(H, gen=g)
-    Wout, bout = _rand(2, H, gen=g), _rand(2, gen=g)
-    hidden = []
-    for _ in range(hidden_layers):
-        hidden += [_rand(H, H, gen=g), _rand(H, gen=g)]
-    return x0, U, W0, b0, Wout, bout, hidden
-
-
-def _euler_reference(dt, x0, U, W0, b0, Wout, bout, *hidden):
-    """The recurrence in plain autograd: x+ = x + dt·(Wout·tanh(...tanh(W0[x,u]+b0)) + bout)."""
-    xs = [x0]
-    x = x0
-    for k in range(U.shape[0]):
-        h = torch.tanh(torch.cat([x, U[k]], dim=1) @ W0.t() + b0)
-        for W, b in zip(hidden[0::2], hidden[1::2], strict=True):
-            h = torch.tanh(h @ W.t() + b)
-        x = x + dt * (h @ Wout.t() + bout)
-        xs.append(x)
-    return torch.stack(xs)
-
-
-@pytest.mark.parametrize("kernels", KERNELS)
+@pytest.mark.parametrize("kernels", TORCH_KERNELS)
 @pytest.mark.parametrize("hidden_layers", [0, 1, 2])
 def test_fused_euler_gradcheck(hidden_layers, kernels):
     dt = 0.1  # large enough that every term of the BPTT matters
-    x0, U, W0, b0, Wout, bout, hidden = _euler_args(hidden_layers=hidden_layers)
+    x0, U, W0, b0, Wout, bout, hidden = euler_args(hidden_layers=hidden_layers)
     inputs = (x0, U, W0, b0, Wout, bout, *hidden)
     assert torch.autograd.gradcheck(
         lambda *a: FusedEulerRollout.apply(dt, kernels, *a), inputs, eps=1e-6, atol=1e-8
     )
     # and the values are the recurrence itself (with torch.tanh), with either kernels
     X = FusedEulerRollout.apply(dt, kernels, *inputs)
-    torch.testing.assert_close(X, _euler_reference(dt, *inputs), rtol=0, atol=1e-13)
+    torch.testing.assert_close(X, euler_reference(dt, *inputs), rtol=0, atol=1e-13)
     assert torch.equal(X[0], x0)
     Ws, bs = hidden[0::2], hidden[1::2]
     Xn = euler_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt=dt, kernels=kernels)
@@ -64,30 +38,19 @@ def test_fused_euler_gradcheck(hidden_layers, kernels):
 
 
 def test_unknown_kernels_are_refused():
-    x0, U, W0, b0, Wout, bout, hidden = _euler_args()
+    x0, U, W0, b0, Wout, bout, hidden = euler_args()
     with pytest.raises(ValueError, match="fused kernels"):
         euler_forward(x0, U, W0, b0, Wout, bout, hidden[0::2], hidden[1::2], 0.1, kernels="x")
 
 
-@pytest.mark.parametrize("kernels", KERNELS)
+@pytest.mark.parametrize("kernels", TORCH_KERNELS)
 @pytest.mark.parametrize(("layers", "n_out"), [(1, 2), (2, 2), (3, 2), (2, 1), (2, 5)])
 def test_fused_mlp_gradcheck(layers, n_out, kernels):
     # n_out <= 4: the fast backward's head product is broadcast (fused_mlp._outer), else mm
-    g = torch.Generator().manual_seed(1)
-    N, n_in, H = 7, 5, 4
-    x = _rand(N, n_in, gen=g)
-    params = []
-    width = n_in
-    for _ in range(layers):
-        params += [_rand(H, width, gen=g), _rand(H, gen=g)]
-        width = H
-    params += [_rand(n_out, H, gen=g), _rand(n_out, gen=g)]
+    x, params = mlp_args(7, 5, 4, layers, n_out)
     mlp = functools.partial(FusedTanhMLP.apply, kernels)
     assert torch.autograd.gradcheck(mlp, (x, *params), eps=1e-6, atol=1e-8)
-    ref = x
-    for W, b in zip(params[0:-2:2], params[1:-2:2], strict=True):
-        ref = torch.tanh(ref @ W.t() + b)
-    ref = ref @ params[-2].t() + params[-1]
+    ref = mlp_reference(x, *params)
     torch.testing.assert_close(mlp(x, *params), ref, rtol=0, atol=1e-14)
 
 
@@ -246,12 +209,12 @@ def test_workspace_rows_are_the_unbound_views_made_once():
 
 
 
-@pytest.mark.parametrize("kernels", KERNELS)
+@pytest.mark.parametrize("kernels", TORCH_KERNELS)
 def test_loops_run_in_inference_mode_but_leave_normal_tensors(kernels):
     # the per-step loops run under torch.inference_mode (fused._loop); what they return and
     # the recycled buffers they write must stay normal tensors, so that autograd can save
     # them and the next epoch can write the buffers again, with the very same numbers
-    x0, U, W0, b0, Wout, bout, hidden = _euler_args(B=3, T=9, H=5, hidden_layers=2)
+    x0, U, W0, b0, Wout, bout, hidden = euler_args(B=3, T=9, H=5, hidden_layers=2)
     inputs = (x0, U, W0, b0, Wout, bout, *hidden)
     WORKSPACE.clear()
     runs = []
@@ -265,6 +228,6 @@ def test_loops_run_in_inference_mode_but_leave_normal_tensors(kernels):
         assert WORKSPACE.free and not any(t.is_inference() for t in WORKSPACE.free)
     assert torch.equal(runs[0][0], runs[1][0])
     assert all(torch.equal(a, b) for a, b in zip(runs[0][1], runs[1][1], strict=True))
-    ref = torch.autograd.grad((_euler_reference(0.1, *inputs) ** 2).sum(), inputs)
+    ref = torch.autograd.grad((euler_reference(0.1, *inputs) ** 2).sum(), inputs)
     for a, b in zip(runs[0][1], ref, strict=True):
         torch.testing.assert_close(a, b, rtol=1e-10, atol=1e-12)

@@ -56,10 +56,11 @@ def test_same_seed_bit_identical_other_seed_different():
     assert not _same_weights(a.model, c.model)
 
 
-def test_fast_kernels_fit_is_deterministic_and_close_to_the_reference():
-    """model.fused_kernels=fast: bit-identical under a seed; the same fit as the reference
-    kernels up to float32 rounding."""
-    fast = {"model": {"fused_kernels": "fast"}}
+@pytest.mark.parametrize("kernels", ["fast", "native"])
+def test_fast_kernels_fit_is_deterministic_and_close_to_the_reference(kernels):
+    """model.fused_kernels=fast or native: bit-identical under a seed; the same fit as the
+    reference kernels up to float32 rounding."""
+    fast = {"model": {"fused_kernels": kernels}}
     a = _fit(with_overrides(_cfg(6, seed=1, dtype="float32"), **fast))
     b = _fit(with_overrides(_cfg(6, seed=1, dtype="float32"), **fast))
     ref = _fit(_cfg(6, seed=1, dtype="float32"))

@@ -58,6 +58,7 @@ CODE_FILES: tuple[str, ...] = (
     "metrics/errors.py",  # the scores
     "signals.py",  # units, the blind zone, the MSE factors
     "vehicle.py",  # the kinematic prior of the residual yaw readout
+    "cbuild.py",  # the compiler flags of the native fused kernels (nss/fused_native.py)
     "experiments/folds.py",  # the fold job and the limiter job
 )
 """The training code: files (globs) under ``src/parknss/`` whose edits change a fit's

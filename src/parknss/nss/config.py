@@ -34,11 +34,12 @@ class ModelConfig(StrictModel):
         description="recurrence engine: fused (whole-rollout autograd.Function, Euler only), "
         "eager (plain per-step autograd loop), auto (fused when possible)",
     )
-    fused_kernels: Literal["reference", "fast"] = Field(
+    fused_kernels: Literal["reference", "fast", "native"] = Field(
         "reference",
         description="arithmetic of the fused engine: reference (the rounding the stored fits "
-        "were made with) or fast (the same functions by cheaper kernels, tanh as 2σ(2a)-1; "
-        "rounded differently, measured against float64 in docs/nss.md)",
+        "were made with), fast (the same functions by cheaper kernels, tanh as 2σ(2a)-1; "
+        "rounded differently, measured against float64 in docs/nss.md) or native (fast's "
+        "formulation with the per-step loops in C built for this machine; float32 only)",
     )
 
 

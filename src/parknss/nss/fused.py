@@ -32,6 +32,7 @@ import weakref
 import torch
 from torch import Tensor
 
+from parknss.nss import fused_native
 from parknss.nss.workspace import WORKSPACE
 
 
@@ -184,7 +185,7 @@ except Exception:  # pragma: no cover - scripting unavailable: run the identical
     _backward, _backward_fast = _backward_kernel, _backward_fast_kernel
 
 
-KERNELS = ("reference", "fast")
+KERNELS = ("reference", "fast", "native")
 """The fused kernels' arithmetic: ``reference`` (the rounding the stored fits were made
 with) or ``fast``: the same functions with cheaper kernels, rounded differently (float32
 results agree to about 1e-6 relative; docs/nss.md): tanh(a) as 2·σ(2a) - 1 (torch's CPU
@@ -192,7 +193,11 @@ tanh costs several times its sigmoid) with the affine 2s - 1 folded into the nex
 weights and bias (the stored activations are s; the reverse loop multiplies by s·(1 - s)
 computed for all steps at once), and the products with a skinny factor (the first
 layers' weight gradients δᵀ·[x, u] over 5-6 inputs, the output net's input gradient) in
-the operand order and layout the BLAS runs 5-10x faster."""
+the operand order and layout the BLAS runs 5-10x faster. ``native``: the reference
+formulation (tanh activations, plain weights) with the two per-step loops, the
+derivatives and the hidden layers' weight gradients in C compiled for this machine
+(:mod:`parknss.nss.fused_native`; float32 only, rounded its own way); the output network
+likewise."""
 
 
 def is_fast(kernels: str) -> bool:
@@ -233,11 +238,43 @@ def _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P, ps):
     )
 
 
-def _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, fast: bool, Hs, store: bool):
+def _stacked(ts: list[Tensor], H: int, dtype: torch.dtype) -> Tensor:
+    """The (H, H) matrices ts as one contiguous (len, H, H) tensor ((0, H, H) if none)."""
+    return torch.stack(ts) if ts else torch.empty((0, H, H), dtype=dtype)
+
+
+def _native_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, P, Hs, store: bool):
+    """X (T, B, 2) by the native forward loop (the reference formulation: activations
+    h = tanh(a), plain weights); fills P (T-1, B, H) = W0u·u + b0 first."""
+    T1, B, m = U.shape
+    torch.addmm(b0, U.reshape(T1 * B, m), W0[:, 2:].t(), out=P.view(T1 * B, -1))
+    H, dtype = W0.shape[0], x0.dtype
+    return fused_native.forward(
+        x0.contiguous(),
+        P,
+        W0[:, :2].t().contiguous(),
+        _stacked([w.t() for w in Ws], H, dtype),
+        torch.stack(list(bs)) if bs else torch.empty((0, H), dtype=dtype),
+        (Wout * dt).contiguous(),
+        (bout * dt).contiguous(),
+        Hs,
+        store,
+    )
+
+
+def _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, kernels: str, Hs, store: bool):
     """X (T, B, 2); the activations into Hs (NL, T-1, B, H) if store, else Hs (NL, 1, B, H)
-    is scratch. The fast kernels, storing, compute P into Hs[0] and each step's first
-    product in place there (the same row objects: addmm then copies no bias)."""
+    is scratch. The fast and native kernels, storing, compute P into Hs[0] and each step's
+    first product in place there (the same row objects: addmm then copies no bias)."""
+    fast, native = is_fast(kernels), kernels == "native"
     T1 = U.shape[0]
+    if native and store:
+        return _native_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt, Hs[0], Hs, True)
+    if native:
+        P = WORKSPACE.take((T1, U.shape[1], W0.shape[0]), x0.dtype)
+        X = _native_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P, Hs, False)
+        WORKSPACE.give(P)
+        return X
     hs = WORKSPACE.rows(Hs) if store else list(Hs.view(-1, Hs.shape[2], Hs.shape[3]).unbind(0))
     if fast and store:
         args = _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, Hs[0], hs[:T1])
@@ -267,10 +304,10 @@ def euler_forward(
     x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, kernels: str = "reference"
 ) -> Tensor:
     """The rollout without gradients (inference): X (T, B, 2), no activations stored."""
-    fast = is_fast(kernels)
+    is_fast(kernels)
     with torch.no_grad():
         scratch = torch.empty((len(Ws) + 1, 1, x0.shape[0], W0.shape[0]), dtype=x0.dtype)
-        return _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, float(dt), fast, scratch, False)
+        return _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, float(dt), kernels, scratch, False)
 
 
 class FusedEulerRollout(torch.autograd.Function):
@@ -283,8 +320,8 @@ class FusedEulerRollout(torch.autograd.Function):
         Ws, bs = list(hidden[0::2]), list(hidden[1::2])
         T1, B, _ = U.shape
         Hs = WORKSPACE.take((len(Ws) + 1, T1, B, W0.shape[0]), x0.dtype)
-        X = _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, float(dt), fast, Hs, True)
-        ctx.dt, ctx.fast = float(dt), fast
+        X = _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, float(dt), kernels, Hs, True)
+        ctx.dt, ctx.fast, ctx.native = float(dt), fast, kernels == "native"
         ctx.Hs = Hs
         # the activations return to the workspace when this graph node is freed
         weakref.finalize(ctx, WORKSPACE.give, Hs)
@@ -297,6 +334,20 @@ class FusedEulerRollout(torch.autograd.Function):
         X, U, W0, Wout, *Ws = ctx.saved_tensors
         Hs, dt = ctx.Hs, ctx.dt
         NL, T1, B, nh = Hs.shape
+        if ctx.native:  # the derivatives and the upper layers' weight gradients inside C
+            D0 = WORKSPACE.take((T1, B, nh), Hs.dtype)
+            rev = fused_native.backward(
+                gX.contiguous(),
+                Hs,
+                D0,
+                W0[:, :2].t().contiguous(),
+                _stacked([w.contiguous() for w in Ws], nh, Hs.dtype),
+                (Wout * dt).contiguous(),
+            )
+            xu = torch.cat([X[:-1].reshape(T1 * B, -1), U.reshape(T1 * B, -1)], dim=1)
+            grads = _weight_grads_native(rev, xu, W0, U, dt, ctx.needs_input_grad[3])
+            WORKSPACE.give(D0)
+            return (None, None, rev.lam[0].clone(), *grads)
         Delta = WORKSPACE.take(tuple(Hs.shape), Hs.dtype)
         ds = WORKSPACE.rows(Delta)
         if ctx.fast:
@@ -373,3 +424,17 @@ def _weight_grads_fast(flat, hflat, lam_next, xu, W0, U, dt, needs_u):
         hidden_grads.append(torch.addmm(corr, flat[i].t(), hflat[i - 1], alpha=4.0))
         hidden_grads.append(col * 2.0)
     return (g_U, g_W0, col0 * 2.0, g_Wout, lsum * dt, *hidden_grads)
+
+
+def _weight_grads_native(rev, xu, W0, U, dt, needs_u):
+    """The same from the native reverse loop's sums (:class:`fused_native.Reverse`): the
+    first layer's from its deltas D0 (the skinny products in the fast order), the hidden
+    layers' G_i and col_i as they are, the head's dt·GH and dt·lsum."""
+    T1, B, H = rev.D0.shape
+    d0 = rev.D0.view(T1 * B, H)
+    g_W0 = xu.t().mm(d0).t()  # skinny: (xᵀ·δ)ᵀ runs ~10x faster than δᵀ·x
+    g_U = d0.mm(W0[:, 2:]).view(U.shape) if needs_u else None
+    hidden_grads = []
+    for i in range(1, rev.col.shape[0]):
+        hidden_grads += [rev.G[i - 1], rev.col[i]]
+    return (g_U, g_W0, rev.col[0], rev.GH * dt, rev.lsum * dt, *hidden_grads)

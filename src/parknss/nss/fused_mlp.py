@@ -19,6 +19,7 @@ import weakref
 
 import torch
 
+from parknss.nss import fused_native
 from parknss.nss.fused import is_fast
 from parknss.nss.workspace import WORKSPACE
 
@@ -34,6 +35,9 @@ class FusedTanhMLP(torch.autograd.Function):
         fast = is_fast(kernels)
         Ws, bs = list(params[0::2]), list(params[1::2])
         N = x.shape[0]
+        ctx.native = kernels == "native" and len(Ws) > 1
+        if ctx.native:
+            return _forward_native(ctx, x, Ws, bs)
         hs = []
         h = x
         for i, (W, b) in enumerate(zip(Ws[:-1], bs[:-1], strict=True)):
@@ -63,6 +67,8 @@ class FusedTanhMLP(torch.autograd.Function):
     @torch.autograd.function.once_differentiable
     def backward(ctx, g):
         x, *Ws = ctx.saved_tensors
+        if ctx.native:
+            return _backward_native(ctx, g.contiguous(), x, Ws)
         if ctx.fast and ctx.hs:
             return _backward_fast(ctx, g.contiguous(), x, Ws)
         hs = ctx.hs
@@ -147,4 +153,45 @@ def _backward_fast(ctx, g, x, Ws) -> tuple:
         gx = d_next.mm(W_next)
     for b in bufs:
         WORKSPACE.give(b)
+    return _pack(gx, grads_W, grads_b)
+
+
+def _forward_native(ctx, x, Ws, bs):
+    """The forward by the native kernels (:mod:`parknss.nss.fused_native`, tanh activations,
+    plain weights): all hidden activations h into one recycled (NL, N, H) buffer."""
+    H = Ws[0].shape[0]
+    S = WORKSPACE.take((len(Ws) - 1, x.shape[0], H), x.dtype)
+    hidden = list(zip(Ws[1:-1], bs[1:-1], strict=True))
+    y = fused_native.mlp_forward(
+        x.contiguous(),
+        Ws[0].t().contiguous(),
+        bs[0].contiguous(),
+        torch.stack([w.t() for w, _ in hidden]) if hidden else x.new_empty((0, H, H)),
+        torch.stack([b for _, b in hidden]) if hidden else x.new_empty((0, H)),
+        Ws[-1].contiguous(),
+        bs[-1].contiguous(),
+        S,
+    )
+    ctx.S = S
+    weakref.finalize(ctx, WORKSPACE.give, S)
+    ctx.save_for_backward(x, *Ws)
+    return y
+
+
+def _backward_native(ctx, g, x, Ws) -> tuple:
+    """Its backward: the sums of the C loop (:class:`fused_native.MLPGrads`) are the weight
+    gradients (the first layer's transposed)."""
+    H = Ws[0].shape[0]
+    hidden = Ws[1:-1]
+    r = fused_native.mlp_backward(
+        x.contiguous(),
+        g,
+        ctx.S,
+        Ws[0].t().contiguous(),
+        torch.stack([w.contiguous() for w in hidden]) if hidden else x.new_empty((0, H, H)),
+        Ws[-1].contiguous(),
+    )
+    grads_W = [r.G0.t(), *r.G.unbind(0), r.GH]
+    grads_b = [r.col[i] for i in range(r.col.shape[0])] + [r.gsum]
+    gx = r.gx if ctx.needs_input_grad[1] else None
     return _pack(gx, grads_W, grads_b)
