@@ -1,7 +1,7 @@
 """Benchmark: what an epoch of the coarse-to-fine recipe's phase 1 costs against a paper epoch.
 
     python benchmarks/bench_coarse.py [--data DIR] [--fold 1] [--factors 1,4,8,16]
-                                      [--epochs 5] [--repeats 3]
+                                      [--epochs 5] [--repeats 3] [--kernels reference]
 
 On one fold of the stratified CV split of the campaign (default: the bundled synthetic
 campaign), the paper-size NSS with the shipped config's weights and one torch thread:
@@ -12,6 +12,8 @@ Adam) in process CPU time, the factors interleaved, ``--epochs`` epochs per fact
 repeat; the median per factor and its ratio to m = 1, all measured in this run. Also the
 CPU time of one held-out validation at the full rate (whole trials, open loop: what every
 validation costs whatever the factor) and the load average before and after.
+``--kernels`` picks the fused engine's kernels (``model.fused_kernels``; default the
+shipped config's).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from parknss.data.windows import whole_trials, window_length
 from parknss.experiments.folds import make_fold
 from parknss.nss.batch import make_batch
 from parknss.nss.config import load_nss_config, with_overrides
+from parknss.nss.fused import KERNELS
 from parknss.nss.model import NORMALIZED
 from parknss.nss.recipes import make_recipe
 from parknss.nss.step import local_step
@@ -45,6 +48,7 @@ def main() -> None:
     ap.add_argument("--factors", default="1,4,8,16")
     ap.add_argument("--epochs", type=int, default=5)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--kernels", choices=KERNELS, default=None)
     args = ap.parse_args()
     torch.set_num_threads(1)
     factors = [int(f) for f in args.factors.split(",")]
@@ -52,6 +56,8 @@ def main() -> None:
     fold = make_fold(camp, "cv", args.fold)  # the fold job's own split
     train, val = [camp[i] for i in fold.train], [camp[i] for i in fold.val]
     base = load_nss_config()
+    if args.kernels:
+        base = with_overrides(base, model={"fused_kernels": args.kernels})
     norm = Normalizer.fit(train, NORMALIZED, base.data.normalizer, base.data.clip_percentiles)
     model = build_model(base, norm, geometry_of(camp))
     L = window_length([t.n for t in train], base.data.window)
@@ -61,7 +67,8 @@ def main() -> None:
         r = make_recipe(cfg, model, train, L)
         batches[m] = r.full if m == 1 else r.coarse
     opt = torch.optim.Adam(model.parameters(), lr=1e-4)
-    print(f"campaign {args.data}, fold {args.fold}: {len(train)} training trials; "
+    print(f"campaign {args.data}, fold {args.fold}: {len(train)} training trials, "
+          f"{base.model.fused_kernels} kernels; "
           f"load before {os.getloadavg()[0]:.2f}")
     for m, b in batches.items():
         print(f"  factor {m:>2}: {b.n} windows x {b.steps} steps of {m * base.model.dt:.2f} s")

@@ -1,4 +1,4 @@
-"""Accuracy of the fused engine's ``fast`` kernels against the ``reference`` ones and float64.
+"""Accuracy of the fused engine's ``fast`` and ``native`` kernels against ``reference``, float64.
 
     python benchmarks/bench_kernels.py [--epochs 40] [--fold 0] [--seed 0] [--skip-fits]
 

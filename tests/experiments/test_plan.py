@@ -144,7 +144,7 @@ def test_estimate_counts_the_store_once_and_charges_only_the_rest(tiny, tmp_path
     assert before.total.cpu_h - after.total.cpu_h == pytest.approx(
         after.rates.cost(shape) / 3600.0)
     assert by["convergence"].cpu_h == 0.0
-    assert after.total.recipes == {"paper": 8, "fast": 2, "coarse": 2, "linear": 4}
+    assert after.total.recipes == {"paper": 8, "fast": 2, "coarse": 4, "linear": 4}
 
 
 def test_a_parked_state_is_credited_with_the_epochs_it_has_done(tiny, tmp_path):

@@ -283,24 +283,27 @@ def test_time_to_accuracy_shares_the_paper_fits_with_table2(tmp_path, tiny_study
     only = json.loads(capsys.readouterr().out)
     assert list(only["verdicts"].values()) == ["not measured"]
     assert len(entries(tmp_path / "results")) == stored
-    assert "4 of 6 fits" in (tmp_path / "s" / "report.html").read_text()
+    assert "6 of 8 fits" in (tmp_path / "s" / "report.html").read_text()
     assert main(["reproduce", "time_to_accuracy", *base, "--out", str(tmp_path / "b")]) == 0
     doc = json.loads(capsys.readouterr().out)
     # the paper recipe's fold fits are Table II's (same resolved config): read, not refitted
-    assert doc["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 2, "fitted": 4}
+    assert doc["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 2, "fitted": 6}
     assert "time_to_accuracy.png" in doc["files"]
     fast = [e for _, e in entries(tmp_path / "results")
             if not isinstance(e, str) and e.kwargs["nss"]["train"].get("recipe") == "fast"]
     assert len(fast) == 2 and all(e.result["recipe"] == "fast" for e in fast)
     coarse = [e for _, e in entries(tmp_path / "results")
               if not isinstance(e, str) and e.kwargs["nss"]["train"].get("recipe") == "coarse"]
-    assert len(coarse) == 2 and all(e.result["recipe"] == "coarse" for e in coarse)
+    assert len(coarse) == 4 and all(e.result["recipe"] == "coarse" for e in coarse)
+    native = [e for e in coarse if e.kwargs["nss"].get("model", {}).get("fused_kernels")]
+    assert len(native) == 2  # the coarse+native challenger: its own fits, keyed apart
+    assert all(e.kwargs["nss"]["model"]["fused_kernels"] == "native" for e in native)
     hist = fast[0].result["history"]
     assert len(hist["cpu_s"]) == len(hist["raw"]) and fast[0].result["cpu_s"] > 0.0
     assert main(["reproduce", "time_to_accuracy", *base, "--stored-only",
                  "--out", str(tmp_path / "t")]) == 0  # fmt: skip
     again = json.loads(capsys.readouterr().out)  # now the store holds it all
-    assert again["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 6, "fitted": 0}
+    assert again["sources"]["time_to_accuracy"] == {"run_cache": 0, "store": 8, "fitted": 0}
     assert "not measured" not in again["verdicts"].values()
     off = [*base[:-3], "--store", "off", "--stored-only", "--out", str(tmp_path / "u")]
     assert main(["reproduce", "time_to_accuracy", *off]) != 0
@@ -481,3 +484,21 @@ def test_a_dirty_entry_says_whether_its_code_is_its_revisions():
     assert dirty_note(entry("0" * 16, head)) == "code not as committed"
     assert dirty_note(entry(committed, "f" * 40)) == "revision unknown here"
     assert dirty_note(entry(committed, head, dirty=False)) == ""
+
+
+def test_time_to_accuracy_challengers_are_recipes_optionally_with_kernels(tmp_path):
+    from parknss.errors import ConfigError
+    from parknss.experiments.config import load_experiments_config
+    from parknss.experiments.time_to_accuracy import challenger_overrides
+
+    assert "coarse+native" in load_experiments_config().full.tta_recipes
+    assert challenger_overrides("fast") == {"train": {"recipe": "fast"}}
+    assert challenger_overrides("coarse+native") == {"train": {"recipe": "coarse"},
+                                                     "model": {"fused_kernels": "native"}}
+    for bad, msg in [("[paper]", "'paper' is not fast or coarse"),
+                     ("[coarse+turbo]", "'coarse\\+turbo' is not"),
+                     ("[coarse, coarse]", "named twice")]:
+        path = tmp_path / "e.yaml"
+        path.write_text(f"full:\n  tta_recipes: {bad}\n")
+        with pytest.raises(ConfigError, match=msg):
+            load_experiments_config(path)

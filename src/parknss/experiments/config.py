@@ -18,6 +18,7 @@ from pydantic import Field, field_validator
 
 from parknss.config import StrictModel, load_config
 from parknss.errors import ConfigError
+from parknss.nss.config import FUSED_KERNELS
 
 Overrides = dict[str, dict[str, Any]]
 
@@ -47,9 +48,10 @@ class Budget(StrictModel):
         ["kinematic", "chain", "reference"], min_length=1,
         description="Table V plants (chain: left out, with a note, when there is none)")
     tta_folds: list[int] = Field([0, 1, 2, 3], description="CV folds of the recipe comparison")
-    tta_recipes: list[Literal["fast", "coarse"]] = Field(
-        ["fast", "coarse"], min_length=1,
-        description="the recipes the time-to-accuracy comparison holds against the paper's")
+    tta_recipes: list[str] = Field(
+        ["fast", "coarse", "coarse+native"], min_length=1,
+        description="the recipes the time-to-accuracy comparison holds against the paper's: "
+        "fast or coarse, each optionally with the fused kernels it runs, `coarse+native`")
     overrides: Overrides = Field(default_factory=dict, description="NSS overrides, all fits")
     recipe: Literal["paper", "fast", "coarse"] = Field(
         "paper",
@@ -70,6 +72,18 @@ class Budget(StrictModel):
         cap ``convergence_epochs`` and the paper's recipe whatever the NSS config says."""
         train = {"epochs": self.convergence_epochs, "recipe": "paper"}
         return merge_overrides(self.overrides, {"train": train})
+
+    @field_validator("tta_recipes")
+    @classmethod
+    def _challengers(cls, v: list[str]) -> list[str]:
+        for name in v:
+            recipe, _, kernels = name.partition("+")
+            if recipe not in ("fast", "coarse") or (kernels and kernels not in FUSED_KERNELS):
+                raise ValueError(f"tta_recipes: {name!r} is not fast or coarse, optionally "
+                                 f"+ fused kernels ({', '.join(FUSED_KERNELS)})")
+        if len(set(v)) != len(v):
+            raise ValueError("tta_recipes: a challenger is named twice")
+        return v
 
     @field_validator("folds", "ablation_folds", "seeds", "loss_lrs", "tta_folds")
     @classmethod

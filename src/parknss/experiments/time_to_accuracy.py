@@ -3,9 +3,10 @@
 For each fold of the budget's ``tta_folds``, fits of the NSS on the same split: the paper
 recipe (the Table II fold job itself, so the result store shares the fit) and each
 challenger recipe of the budget's ``tta_recipes`` (``fast``, ``coarse``:
-:mod:`parknss.nss.recipes`). Each fit's history gives the held-out criterion
-(moving-region state loss of whole-trial open-loop rollouts, the value the best
-checkpoint is chosen on; raw and smoothed) at the fit's CPU time.
+:mod:`parknss.nss.recipes`; ``coarse+native``: that recipe with the fused engine's
+``native`` kernels, :mod:`parknss.nss.fused_native`). Each fit's history gives the
+held-out criterion (moving-region state loss of whole-trial open-loop rollouts, the value
+the best checkpoint is chosen on; raw and smoothed) at the fit's CPU time.
 
 * target: the paper fit's best smoothed criterion (the error its final model was chosen
   at);
@@ -209,16 +210,27 @@ COLUMNS = [
 
 def tta_jobs(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> list[Job]:
     """Per fold of the budget's ``tta_folds``: the paper recipe's fit (that fold's Table
-    II NSS fit) and one fit of each recipe of the budget's ``tta_recipes``."""
+    II NSS fit) and one fit of each challenger of the budget's ``tta_recipes`` (a recipe,
+    or ``recipe+kernels``: :func:`challenger_overrides`)."""
     b = cfg.budget(quick)
     paper_ov = b.deployment_overrides()
     jobs = []
     for i in b.tta_folds:
         jobs.append(fold_spec(sweep, "cv", i, paper_ov, name=f"paper recipe fold {i}"))
-        for recipe in b.tta_recipes:
-            ov = merge_overrides(paper_ov, {"train": {"recipe": recipe}})
-            jobs.append(fold_spec(sweep, "cv", i, ov, name=f"{recipe} recipe fold {i}"))
+        for name in b.tta_recipes:
+            ov = merge_overrides(paper_ov, challenger_overrides(name))
+            jobs.append(fold_spec(sweep, "cv", i, ov, name=f"{name} recipe fold {i}"))
     return jobs
+
+
+def challenger_overrides(name: str) -> dict:
+    """The NSS overrides of a challenger named ``recipe`` or ``recipe+kernels`` (the fused
+    kernels it trains with, ``model.fused_kernels``; without: the config's)."""
+    recipe, _, kernels = name.partition("+")
+    over: dict = {"train": {"recipe": recipe}}
+    if kernels:
+        over["model"] = {"fused_kernels": kernels}
+    return over
 
 
 def time_to_accuracy(cfg: ExperimentsConfig, quick: bool, sweep: Sweep) -> TTAResult:

@@ -15,6 +15,10 @@ from pydantic import Field, field_validator, model_validator
 from parknss.config import StrictModel, load_config, override, parse_set
 from parknss.signals import BLIND_ZONE_KMH, DT
 
+FusedKernels = Literal["reference", "fast", "native"]
+FUSED_KERNELS: tuple[str, ...] = FusedKernels.__args__
+"""The fused engine's kernel sets (``model.fused_kernels``; :data:`parknss.nss.fused.KERNELS`)."""
+
 
 class ModelConfig(StrictModel):
     """Architecture (§II): state net f on [x̂, u] -> dx/dt, output net g -> [ax, ay]."""
@@ -34,7 +38,7 @@ class ModelConfig(StrictModel):
         description="recurrence engine: fused (whole-rollout autograd.Function, Euler only), "
         "eager (plain per-step autograd loop), auto (fused when possible)",
     )
-    fused_kernels: Literal["reference", "fast", "native"] = Field(
+    fused_kernels: FusedKernels = Field(
         "reference",
         description="arithmetic of the fused engine: reference (the rounding the stored fits "
         "were made with), fast (the same functions by cheaper kernels, tanh as 2σ(2a)-1; "

@@ -33,6 +33,7 @@ import torch
 from torch import Tensor
 
 from parknss.nss import fused_native
+from parknss.nss.config import FUSED_KERNELS
 from parknss.nss.workspace import WORKSPACE
 
 
@@ -185,7 +186,7 @@ except Exception:  # pragma: no cover - scripting unavailable: run the identical
     _backward, _backward_fast = _backward_kernel, _backward_fast_kernel
 
 
-KERNELS = ("reference", "fast", "native")
+KERNELS = FUSED_KERNELS
 """The fused kernels' arithmetic: ``reference`` (the rounding the stored fits were made
 with) or ``fast``: the same functions with cheaper kernels, rounded differently (float32
 results agree to about 1e-6 relative; docs/nss.md): tanh(a) as 2·σ(2a) - 1 (torch's CPU
