@@ -94,6 +94,7 @@ def test_the_default_recipe_is_the_coarse_one(env, tmp_path, capsys):
     from parknss.experiments.identify.config import IdentifyConfig, load_identify_config
 
     assert IdentifyConfig().recipe == load_identify_config(None).recipe == "coarse"
+    assert IdentifyConfig().kernels == load_identify_config(None).kernels == "native"
     out = tmp_path / "car"
     coarse = ["coarse.factor=4", "coarse.epochs=3", "coarse.val_every=2", "coarse.finish_epochs=2"]
     sets = [x for s in [*NSS_SET, *coarse] for x in ("--set", s)]
@@ -103,6 +104,7 @@ def test_the_default_recipe_is_the_coarse_one(env, tmp_path, capsys):
     meta = json.loads((out / "nss" / "model" / "model.json").read_text())
     text = json.dumps(meta)
     assert '"recipe": "coarse"' in text and '"factor": 4' in text
+    assert meta["config"]["model"]["fused_kernels"] == "native"  # identify's default kernels
 
 
 def test_phase_a_fitted_beside_the_nss_gives_the_same_chain(env, car, tmp_path, monkeypatch):
@@ -383,6 +385,10 @@ def test_config_mismatch_rules():
     assert config_mismatch(coarse, {**coarse, "fast": {"updates": 2000}}) is None
     assert "coarse.factor" in config_mismatch(
         {"train": {"recipe": "coarse"}}, {**coarse})  # its own section must be recorded
+    # the fused kernels decide a fit's rounding only: a reference fit serves a native run
+    native = {**coarse, "model": {"fused_kernels": "native"}}
+    assert config_mismatch(coarse, native) is None
+    assert config_mismatch({**coarse, "model": {"fused_kernels": "fast"}}, native) is None
 
 
 def test_from_a_folder_of_logs(env, tmp_path, capsys):

@@ -128,3 +128,45 @@ def test_float64_is_refused_in_one_line():
     x, params = mlp_args(4, 5, 16, 2, 2)
     with pytest.raises(ParknssError, match="float32 only"):
         FusedTanhMLP.apply("native", x, *params)
+
+
+def test_a_float64_copy_of_a_native_model_runs_the_reference_kernels():
+    """A chain holds its NSS in float64: a model configured for the float32-only native
+    kernels then runs the reference ones, the same numbers as a reference model's."""
+    from helpers.synth import make_campaign, tiny_model
+    from parknss.data.windows import whole_trials
+
+    camp = make_campaign(120, reps=1)
+    nat, _ = tiny_model(camp, seed=3, dtype="float32", model={"fused_kernels": "native"})
+    ref, _ = tiny_model(camp, seed=3, dtype="float32")
+    w = whole_trials(list(camp))
+    x0, u = torch.as_tensor(w.states[:, 0]), torch.as_tensor(w.inputs)
+    assert nat.kernels() == "native" and ref.kernels() == "reference"
+    nat, ref = nat.double(), ref.double()
+    assert nat.kernels() == "reference"
+    with torch.no_grad():
+        a, b = nat.rollout(x0, u), ref.rollout(x0, u)
+    assert torch.equal(a.state_s, b.state_s) and torch.equal(a.ax, b.ax)
+
+
+def test_native_training_in_float64_is_refused_by_the_config():
+    from parknss.errors import ConfigError
+    from parknss.nss.config import NSSConfig, with_overrides
+
+    with pytest.raises(ConfigError, match="float32 only"):
+        with_overrides(NSSConfig(), model={"fused_kernels": "native"}, train={"dtype": "float64"})
+
+
+def test_no_compiler_is_one_line_naming_the_way_out(monkeypatch, tmp_path):
+    from parknss.nss import fused_native
+
+    monkeypatch.setenv("PARKNSS_CACHE", str(tmp_path))  # nothing built here yet
+    monkeypatch.setenv("CC", "")
+    monkeypatch.setenv("PATH", str(tmp_path))  # no gcc, no cc
+    fused_native.library.cache_clear()
+    try:
+        with pytest.raises(ParknssError, match=r"no C compiler.*fused_kernels=reference") as e:
+            fused_native.library()
+        assert "\n" not in str(e.value)
+    finally:
+        fused_native.library.cache_clear()

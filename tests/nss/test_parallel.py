@@ -119,6 +119,20 @@ def test_two_process_fit_is_the_one_process_fit_up_to_rounding(recipe):
     assert two.cpu_s > two.history.rows[0]["cpu_s"] > 0.0
 
 
+def test_two_process_native_fit_is_the_one_process_fit_up_to_float32_rounding():
+    """The native kernels (float32, C) in each worker: the same fit within float32 rounding."""
+    def cfg(processes):
+        base = tiny_config("float32", train={"epochs": 6, "seed": 4, "val_every": 2,
+                                             "smooth_window": 3, "processes": processes})
+        return with_overrides(base, model={"fused_kernels": "native"})
+
+    one, two = _fit(cfg(1)), _fit(cfg(2))
+    for a, b in zip(_rows(one), _rows(two), strict=True):
+        for k, v in a.items():
+            assert b[k] == (v if isinstance(v, str) else pytest.approx(v, rel=1e-4, abs=1e-7))
+    assert one.model.kernels() == two.model.kernels() == "native"
+
+
 def test_two_process_fit_is_deterministic_resumable_and_its_own_identity(tmp_path):
     """Bit-identical on a rerun and across a kill and resume; another fit than P = 1 for
     the fingerprint (a one-process resume of its state is refused)."""

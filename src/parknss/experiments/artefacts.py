@@ -237,7 +237,7 @@ def table2_artefact(ctx: RunContext) -> ArtefactResult:
     return ArtefactResult([table], [fig], found)
 
 
-@register("time_to_accuracy", "Time to accuracy: paper vs fast and coarse training recipes",
+@register("time_to_accuracy", "Time to accuracy: the paper recipe vs the challenger recipes",
           "§IV-B")
 def time_to_accuracy_artefact(ctx: RunContext) -> ArtefactResult:
     from parknss.experiments.time_to_accuracy import COLUMNS, time_to_accuracy

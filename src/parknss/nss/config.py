@@ -261,6 +261,9 @@ class NSSConfig(StrictModel):
     def _fused_needs_euler(self) -> NSSConfig:
         if self.model.engine == "fused" and self.model.integrator != "euler":
             raise ValueError("engine 'fused' implements forward Euler only; use 'auto'/'eager'")
+        if self.model.fused_kernels == "native" and self.train.dtype != "float32":
+            raise ValueError("fused_kernels 'native' trains in float32 only; set train.dtype "
+                             "float32 or another fused_kernels")
         return self
 
 

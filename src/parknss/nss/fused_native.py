@@ -350,8 +350,13 @@ _I = ctypes.c_int
 @functools.cache
 def library() -> ctypes.CDLL:
     """The compiled kernels (built once per machine, cached; ParknssError without a C
-    compiler or on a failed build)."""
-    lib = ctypes.CDLL(str(compile_library({"pk_nss.c": C_SOURCE}, FLAGS)))
+    compiler or on a failed build, naming the way out)."""
+    try:
+        path = compile_library({"pk_nss.c": C_SOURCE}, FLAGS)
+    except ParknssError as e:
+        raise ParknssError(f"the native fused kernels: {e}; or use model.fused_kernels "
+                           "reference (--set model.fused_kernels=reference)") from e
+    lib = ctypes.CDLL(str(path))
     lib.pk_nss_forward.argtypes = [_I] * 6 + [_P] * 8
     lib.pk_nss_forward.restype = None
     lib.pk_nss_backward.argtypes = [_I] * 5 + [_P] * 14

@@ -225,13 +225,21 @@ class NSSModel(nn.Module):
         args = (x0_s, U, lin[0].weight, lin[0].bias, lin[-1].weight, lin[-1].bias)
         needs_grad = x0_s.requires_grad or U.requires_grad
         needs_grad = needs_grad or any(p.requires_grad for p in self.state_net.parameters())
+        kernels = self.kernels()
         if torch.is_grad_enabled() and needs_grad:
-            X = FusedEulerRollout.apply(dt, self.cfg.fused_kernels, *args, *hidden)
+            X = FusedEulerRollout.apply(dt, kernels, *args, *hidden)
         else:
-            X = euler_forward(
-                *args, hidden[0::2], hidden[1::2], dt=dt, kernels=self.cfg.fused_kernels
-            )
+            X = euler_forward(*args, hidden[0::2], hidden[1::2], dt=dt, kernels=kernels)
         return X.transpose(0, 1)
+
+    def kernels(self) -> str:
+        """The fused kernels this model runs: ``cfg.fused_kernels``, except that a model in
+        a dtype other than float32 (a chain's float64 copy, an evaluation in float64) runs
+        the ``reference`` kernels where its config names the float32-only ``native`` ones
+        (the config forbids training so: :class:`~parknss.nss.config.NSSConfig`)."""
+        if self.cfg.fused_kernels == "native" and self.dtype != torch.float32:
+            return "reference"
+        return self.cfg.fused_kernels
 
     def _eager(
         self, x0_s: Tensor, u_s: Tensor, limiter: StateLimiter | None, dt: float
@@ -264,7 +272,7 @@ class NSSModel(nn.Module):
         lin = linear_layers(self.output_net)
         params = [t for m in lin for t in (m.weight, m.bias)]
         flat = g_in.reshape(-1, g_in.shape[-1]).contiguous()
-        return FusedTanhMLP.apply(self.cfg.fused_kernels, flat, *params).view(*g_in.shape[:-1], -1)
+        return FusedTanhMLP.apply(self.kernels(), flat, *params).view(*g_in.shape[:-1], -1)
 
     def reconstruct_yaw(self, X_s: Tensor, steer_s: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """The yaw readout (eq. 5) at internal states X_s (..., 2) and scaled steering (...):

@@ -9,6 +9,7 @@ from typing import Literal
 from pydantic import Field
 
 from parknss.config import StrictModel, load_config
+from parknss.nss.config import FusedKernels
 
 STAGES: tuple[str, ...] = (
     "data", "nss", "selection", "chain", "rating", "tune", "grid", "fidelity", "export", "card",
@@ -39,6 +40,7 @@ class IdentifyConfig(StrictModel):
     """What ``parknss identify`` runs when no option says otherwise."""
 
     recipe: Literal["paper", "fast", "coarse"] = "coarse"
+    kernels: FusedKernels = "native"
     grid: Literal["36", "12", "252"] = "36"
     grid_cells: str | None = None
     tune_rounds: int = Field(1, ge=1)

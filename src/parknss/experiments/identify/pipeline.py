@@ -103,12 +103,18 @@ class Pipeline:
         self.truth: tuple[Path | None, str] | None = None
 
     # ------------------------------------------------------------------ helpers
+    def nss_overrides(self) -> dict:
+        """The NSS config overrides of this run: ``--set``, the recipe, and the fused
+        kernels of the config's ``kernels`` unless ``--set model.fused_kernels`` names them."""
+        over = {k: dict(v) for k, v in self.inp.nss_overrides.items()}
+        over.setdefault("train", {})["recipe"] = self.recipe
+        over.setdefault("model", {}).setdefault("fused_kernels", self.cfg.kernels)
+        return over
+
     def nss_config(self):
         from parknss.experiments.folds import fold_config
 
-        over = {k: dict(v) for k, v in self.inp.nss_overrides.items()}
-        over.setdefault("train", {})["recipe"] = self.recipe
-        return fold_config(None, over)
+        return fold_config(None, self.nss_overrides())
 
     def estimates(self, wanted: tuple[str, ...]) -> dict[str, float]:
         e = self.cfg.estimate_s
@@ -257,7 +263,7 @@ class Pipeline:
             resume = not fresh and train_state.exists(out / "state")
             with self.phase_a_ahead():
                 doc, text = train_deployment(TrainInputs(
-                    out=out, data=self.campaign_dir(), overrides=_overrides(cfg, self.inp),
+                    out=out, data=self.campaign_dir(), overrides=self.nss_overrides(),
                     resume=resume, overwrite=True))
             self.say(text)
             return StageOutcome({"model": doc["model"], "code": "current",
@@ -486,12 +492,6 @@ def _file_sha(path) -> str | None:
     if path is None:
         return None
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
-
-
-def _overrides(cfg, inputs: IdentifyInputs) -> dict:
-    over = {k: dict(v) for k, v in inputs.nss_overrides.items()}
-    over.setdefault("train", {})["recipe"] = cfg.train.recipe
-    return over
 
 
 def _domain(dom) -> dict:

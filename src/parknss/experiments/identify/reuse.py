@@ -5,13 +5,15 @@
   setting recorded in the model equals this run's resolved NSS config (a setting the model
   does not record is accepted only when it belongs to a recipe the fit did not use: the
   ``fast`` or ``coarse`` section of a fit made with another recipe, and ``train.recipe:
-  paper`` for a model from before recipes existed). A mismatch is refused in one line
-  naming the field; nothing is reused then. The training-code version is checked too:
-  the model's recorded ``code_version``, else the version of the code at its recorded git
-  revision (from the checkout's git history); it must be the current version or one the
-  canary lineage (``results/lineage``) records as computing the same numbers. A version that is not
-  shown equal is refused unless ``allow_code_change`` (``--allow-code-change``), and the
-  model card then says so.
+  paper`` for a model from before recipes existed). ``model.fused_kernels`` is not
+  compared: the kernels decide only the float32 rounding of a fit, not what is fitted (a
+  model trained with the reference kernels serves a run that would train with the native
+  ones). A mismatch is refused in one line naming the field; nothing is reused then. The
+  training-code version is checked too: the model's recorded ``code_version``, else the
+  version of the code at its recorded git revision (from the checkout's git history); it
+  must be the current version or one the canary lineage (``results/lineage``) records as
+  computing the same numbers. A version that is not shown equal is refused unless
+  ``allow_code_change`` (``--allow-code-change``), and the model card then says so.
 * **An actuator selection** (``--selection``, :func:`selection_winners`): the winners of a
   study's ``selection.json`` or of a chain artefact's build record.
 * **The truth** (:func:`truth_vehicle`): a synthetic campaign of the reference vehicle
@@ -29,6 +31,9 @@ from parknss.errors import ConfigError, ParknssError
 from parknss.experiments.lineage import accepted_versions
 from parknss.experiments.store import code_version, revision_code_version
 from parknss.nss.config import RECIPE_SECTIONS
+
+ROUNDING_ONLY: tuple[str, ...] = ("model.fused_kernels",)
+"""Training settings that decide only a fit's rounding, not compared for reuse."""
 
 
 class ReuseRefusedError(ParknssError):
@@ -52,6 +57,8 @@ def config_mismatch(recorded: dict, wanted: dict) -> str | None:
     rec, want = flat(recorded), flat(wanted)
     recipe = rec.get("train.recipe", "paper")
     for key in sorted(set(rec) | set(want)):
+        if key in ROUNDING_ONLY:
+            continue
         if key in rec and key in want:
             if rec[key] != want[key]:
                 return f"{key} is {rec[key]!r} in the model, {want[key]!r} here"
