@@ -25,7 +25,7 @@ class StageEstimates(StrictModel):
     data: float = Field(10.0, ge=0)
     nss_paper_epoch: float = Field(2.2, ge=0, description="s per paper-recipe epoch")
     nss_fast: float = Field(950.0, ge=0, description="s for the whole fast recipe")
-    nss_coarse: float = Field(950.0, ge=0, description="s for the whole coarse recipe")
+    nss_coarse: float = Field(550.0, ge=0, description="s for the whole coarse recipe")
     selection: float = Field(1200.0, ge=0)
     chain: float = Field(300.0, ge=0)
     rating: float = Field(60.0, ge=0)
