@@ -14,6 +14,8 @@ module computes exactly the same recurrence as one :class:`torch.autograd.Functi
   matmuls over all steps and windows, Σ_k δ_kᵀ h_k, at full matmul efficiency;
 * ``kernels="fast"`` (:data:`KERNELS`, ``model.fused_kernels``) evaluates the same
   functions by cheaper kernels with other rounding; the default keeps the old numbers;
+  ``kernels="native"`` runs both loops, the hidden layers' weight gradients and the
+  output network in C built for this machine (:mod:`parknss.nss.fused_native`, float32);
 * the large buffers (input projections, activations, deltas) are recycled between epochs
   (:mod:`parknss.nss.workspace`), so hundreds of MB of fresh pages are not faulted in
   every epoch, and the loops get their per-step (B, H) views of them as lists made once
@@ -239,11 +241,6 @@ def _prepare_fast(x0, U, W0, b0, Wout, bout, Ws, bs, dt, P, ps):
     )
 
 
-def _stacked(ts: list[Tensor], H: int, dtype: torch.dtype) -> Tensor:
-    """The (H, H) matrices ts as one contiguous (len, H, H) tensor ((0, H, H) if none)."""
-    return torch.stack(ts) if ts else torch.empty((0, H, H), dtype=dtype)
-
-
 def _native_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, P, Hs, store: bool):
     """X (T, B, 2) by the native forward loop (the reference formulation: activations
     h = tanh(a), plain weights); fills P (T-1, B, H) = W0u·u + b0 first."""
@@ -254,8 +251,8 @@ def _native_forward(x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, P, Hs, store: 
         x0.contiguous(),
         P,
         W0[:, :2].t().contiguous(),
-        _stacked([w.t() for w in Ws], H, dtype),
-        torch.stack(list(bs)) if bs else torch.empty((0, H), dtype=dtype),
+        fused_native.stacked([w.t() for w in Ws], (H, H), dtype),
+        fused_native.stacked(list(bs), (H,), dtype),
         (Wout * dt).contiguous(),
         (bout * dt).contiguous(),
         Hs,
@@ -305,7 +302,7 @@ def euler_forward(
     x0, U, W0, b0, Wout, bout, Ws, bs, dt: float, kernels: str = "reference"
 ) -> Tensor:
     """The rollout without gradients (inference): X (T, B, 2), no activations stored."""
-    is_fast(kernels)
+    is_fast(kernels)  # an unknown name is refused here
     with torch.no_grad():
         scratch = torch.empty((len(Ws) + 1, 1, x0.shape[0], W0.shape[0]), dtype=x0.dtype)
         return _run_forward(x0, U, W0, b0, Wout, bout, Ws, bs, float(dt), kernels, scratch, False)
@@ -342,7 +339,7 @@ class FusedEulerRollout(torch.autograd.Function):
                 Hs,
                 D0,
                 W0[:, :2].t().contiguous(),
-                _stacked([w.contiguous() for w in Ws], nh, Hs.dtype),
+                fused_native.stacked(list(Ws), (nh, nh), Hs.dtype),
                 (Wout * dt).contiguous(),
             )
             xu = torch.cat([X[:-1].reshape(T1 * B, -1), U.reshape(T1 * B, -1)], dim=1)

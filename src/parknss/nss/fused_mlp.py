@@ -166,8 +166,8 @@ def _forward_native(ctx, x, Ws, bs):
         x.contiguous(),
         Ws[0].t().contiguous(),
         bs[0].contiguous(),
-        torch.stack([w.t() for w, _ in hidden]) if hidden else x.new_empty((0, H, H)),
-        torch.stack([b for _, b in hidden]) if hidden else x.new_empty((0, H)),
+        fused_native.stacked([w.t() for w, _ in hidden], (H, H), x.dtype),
+        fused_native.stacked([b for _, b in hidden], (H,), x.dtype),
         Ws[-1].contiguous(),
         bs[-1].contiguous(),
         S,
@@ -188,7 +188,7 @@ def _backward_native(ctx, g, x, Ws) -> tuple:
         g,
         ctx.S,
         Ws[0].t().contiguous(),
-        torch.stack([w.contiguous() for w in hidden]) if hidden else x.new_empty((0, H, H)),
+        fused_native.stacked(list(hidden), (H, H), x.dtype),
         Ws[-1].contiguous(),
     )
     grads_W = [r.G0.t(), *r.G.unbind(0), r.GH]

@@ -383,6 +383,12 @@ def _ptrs(*tensors: Tensor, dtype: torch.dtype = torch.float32) -> list[_P]:
     return out
 
 
+def stacked(ts: list[Tensor], shape: tuple[int, ...], dtype: torch.dtype) -> Tensor:
+    """The tensors ``ts`` (each of ``shape``) as one contiguous (len, *shape) tensor, the
+    layout the kernels read per-layer weights and biases in; (0, *shape) when there are none."""
+    return torch.stack(ts) if ts else torch.empty((0, *shape), dtype=dtype)
+
+
 def forward(x0: Tensor, P: Tensor, W0xT: Tensor, WhT: Tensor, bh: Tensor, Wo: Tensor,
             c: Tensor, Hs: Tensor, store: bool) -> Tensor:
     """X (T, B, n_x) of the forward loop; the activations s into Hs (module doc)."""
