@@ -375,7 +375,7 @@ def _ptrs(*tensors: Tensor, dtype: torch.dtype = torch.float32) -> list[_P]:
         if t.dtype != dtype:
             raise ParknssError(
                 f"the native fused kernels are float32 only (got {t.dtype}); "
-                "use train.dtype float32 or model.fused_kernels fast"
+                "use train.dtype float32 or model.fused_kernels reference"
             )
         if not t.is_contiguous() or t.device.type != "cpu":
             raise ParknssError("the native fused kernels need contiguous CPU tensors")
@@ -391,7 +391,7 @@ def stacked(ts: list[Tensor], shape: tuple[int, ...], dtype: torch.dtype) -> Ten
 
 def forward(x0: Tensor, P: Tensor, W0xT: Tensor, WhT: Tensor, bh: Tensor, Wo: Tensor,
             c: Tensor, Hs: Tensor, store: bool) -> Tensor:
-    """X (T, B, n_x) of the forward loop; the activations s into Hs (module doc)."""
+    """X (T, B, n_x) of the forward loop; the activations h into Hs (module doc)."""
     T1, B, H = P.shape
     nx = x0.shape[1]
     X = torch.empty((T1 + 1, B, nx), dtype=x0.dtype)
@@ -445,7 +445,7 @@ def backward(gX: Tensor, Hs: Tensor, D0: Tensor, W0xT: Tensor, Wh: Tensor,
 
 def mlp_forward(x: Tensor, W0T: Tensor, b0: Tensor, WT: Tensor, bh: Tensor, Wo: Tensor,
                 bo: Tensor, S: Tensor) -> Tensor:
-    """y (N, n_out) of the output network, the activations s into S (NL, N, H)."""
+    """y (N, n_out) of the output network, the activations h into S (NL, N, H)."""
     N, n_in = x.shape
     NL, _, H = S.shape
     y = torch.empty((N, Wo.shape[0]), dtype=x.dtype)
