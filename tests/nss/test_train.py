@@ -229,3 +229,28 @@ def test_sample_rate_mismatch_raises():
         fit(TRAIN, [bad], _cfg(1), progress=False)
     with pytest.raises(DataError):
         fit([], (), _cfg(1), progress=False)
+
+
+def test_a_finite_loss_with_a_non_finite_gradient_stops_that_step(monkeypatch, tmp_path):
+    """The sensitivity of a long rollout can overflow where the rollout stays bounded (a
+    coarse fit's first full-rate step, docs/nss.md): the step is refused, named, before
+    Adam turns it into non-finite weights; the state saved before it is kept whole."""
+    from parknss.errors import ParknssError
+
+    real = train_mod.local_step
+
+    def overflowing(model, batch, cfg, step, share=None):
+        terms = real(model, batch, cfg, step, share)
+        if step == 3:
+            next(model.parameters()).grad[0, 0] = float("inf")
+        return terms
+
+    monkeypatch.setattr(train_mod, "local_step", overflowing)
+    out = tmp_path / "fit"
+    with pytest.raises(ParknssError, match=r"diverged at step 3: the loss is finite .* "
+                                           r"gradient is not") as e:
+        _fit(with_overrides(_cfg(6), train={"checkpoint_every": 1}), out_dir=out)
+    assert "\n" not in str(e.value)
+    import json
+
+    assert json.loads((out / "train_state.json").read_text())["epoch"] == 2  # before it

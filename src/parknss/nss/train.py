@@ -142,6 +142,20 @@ class _LocalSteps:
         return local_step(model, batch, cfg, step)
 
 
+def _check_gradient(model: NSSModel, step: int, loss: float) -> None:
+    """Refuse a step whose loss is finite but whose gradient is not (the sensitivity of a
+    long rollout can overflow the float range where the rollout itself stays bounded):
+    Adam would turn it into non-finite weights, and the fit would fail one step later
+    without saying why. One line, before the weights change."""
+    grads = [p.grad for p in model.parameters() if p.grad is not None]
+    if grads and not bool(torch.stack([g.abs().amax() for g in grads]).isfinite().all()):
+        raise ParknssError(
+            f"training diverged at step {step}: the loss is finite ({loss:.6g}) but its "
+            f"gradient is not (the rollout's sensitivity overflows "
+            f"{str(model.dtype).removeprefix('torch.')}); "
+            "try another train.seed or recipe")
+
+
 def _stepper(model: NSSModel, cfg: NSSConfig, steps_left: int):
     """The training step of this fit: data-parallel over ``train.processes`` processes
     (:mod:`parknss.nss.parallel`) or in this process alone (1, or nothing left to train)."""
@@ -270,6 +284,7 @@ def _fit(train, val, cfg, geometry, out_dir, resume, progress, on_epoch) -> FitR
                     best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
                     if avg is not None:
                         best_state.update({k: v.clone() for k, v in avg.avg.items()})
+                _check_gradient(model, e, row["train_total"])
                 opt.step()
                 if avg is not None:
                     avg.update(model)
