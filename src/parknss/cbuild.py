@@ -7,8 +7,9 @@ machine's vector instructions; a compiler that refuses the flags gets the portab
 machine's CPU under ``$PARKNSS_CACHE`` (default ``~/.cache/parknss``)/native, written
 atomically, so a library compiles once per machine. No compiler, or a failing build, is
 one-line :class:`~parknss.errors.ParknssError`. Users: the chain's generated C step
-(:mod:`parknss.chain.native`), the FMU (:mod:`parknss.export.fmu`) and the native kernels
-of the fused NSS rollout (:mod:`parknss.nss.fused_native`).
+(:mod:`parknss.chain.native`), the FMU (:mod:`parknss.export.fmu`), the native kernels
+of the fused NSS rollout (:mod:`parknss.nss.fused_native`) and the ISO rating's DTW
+(:mod:`parknss.metrics.dtw_native`).
 """
 
 from __future__ import annotations

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -81,6 +82,10 @@ class ISORatingConfig(StrictModel):
     max_shift_fraction: float = Field(0.2, gt=0, lt=1, description="εP, of N")
     phase_exponent: float = Field(1.0, gt=0, description="kp")
     dtw_band_fraction: float = Field(0.1, gt=0, le=1, description="DTW band, of L")
+    dtw_engine: Literal["auto", "numpy", "native"] = Field(
+        "auto", description="the magnitude rating's DTW: numpy (the sweep here), native (the "
+        "same in C, metrics/dtw_native.py, bit for bit) or auto (native where a C compiler "
+        "builds it)")
     magnitude_limit: float = Field(0.5, gt=0, description="εM")
     magnitude_exponent: float = Field(1.0, gt=0, description="km")
     slope_window: int = Field(9, ge=1, description="moving-average points (odd)")
@@ -459,11 +464,25 @@ def _magnitude_score(num: float, den: float, cfg: ISORatingConfig) -> float:
     return _limited_score(_ratio(num, den), cfg.magnitude_limit, cfg.magnitude_exponent, False)
 
 
+def warping_sums(xs, ys, bands, engine: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """:func:`dtw_path_sums_many` by the DTW ``engine`` (ISORatingConfig.dtw_engine): the
+    NumPy sweep, or its C twin :mod:`parknss.metrics.dtw_native` pair by pair (the same
+    numbers bit for bit; ``auto``: C where a compiler builds it, else the sweep)."""
+    if engine != "numpy":
+        from parknss.metrics import dtw_native  # the compiler is looked for only here
+
+        if engine == "native" or dtw_native.available():
+            sums = [dtw_native.path_sums(x, y, b) for x, y, b in zip(xs, ys, bands, strict=True)]
+            return np.array([s[0] for s in sums]), np.array([s[1] for s in sums])
+    return dtw_path_sums_many(xs, ys, bands)
+
+
 def magnitude_rating(meas_shifted: np.ndarray, pred_shifted: np.ndarray, config=None) -> float:
     """EEARTH magnitude sub-rating EM of the phase-shifted, truncated curves."""
     cfg = config or ISORatingConfig()
     band = _dtw_band(meas_shifted.size, cfg)
-    return _magnitude_score(*dtw_path_sums(pred_shifted, meas_shifted, band), cfg)
+    num, den = warping_sums([pred_shifted], [meas_shifted], [band], cfg.dtw_engine)
+    return _magnitude_score(float(num[0]), float(den[0]), cfg)
 
 
 def smoothed_derivative(curve: np.ndarray, dt: float, window: int = 9) -> np.ndarray:
@@ -519,9 +538,10 @@ def rate_many(
     """The :func:`rate` of each (measured, predicted) pair, all on grids of spacing dt s.
 
     Every pair is validated and rated exactly as :func:`rate` would (the results are
-    bit-identical); the pairs may differ in length. Their magnitude warpings run in one
-    batched sweep (:func:`dtw_path_sums_many`), which is what makes rating a trial's
-    channels together faster than one by one. ``labels`` name the pairs in error
+    bit-identical); the pairs may differ in length. Their magnitude warpings run in C
+    where it builds (:func:`warping_sums`), else in one batched sweep
+    (:func:`dtw_path_sums_many`), which makes rating a trial's channels together faster
+    than one by one. ``labels`` name the pairs in error
     messages (default ``"signal i"``).
     """
     cfg = config or ISORatingConfig()
@@ -534,9 +554,9 @@ def rate_many(
         return []
     shifts = [phase_shift(m, p, cfg) for m, p in checked]
     windows = [_windows(m, p, shift) for (m, p), shift in zip(checked, shifts, strict=True)]
-    nums, dens = dtw_path_sums_many(
+    nums, dens = warping_sums(
         [ps for _, ps in windows], [ms for ms, _ in windows],
-        [_dtw_band(ms.size, cfg) for ms, _ in windows],
+        [_dtw_band(ms.size, cfg) for ms, _ in windows], cfg.dtw_engine,
     )
     out = []
     for k, ((m, p), shift, (ms, ps)) in enumerate(zip(checked, shifts, windows, strict=True)):
