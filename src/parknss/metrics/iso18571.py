@@ -76,6 +76,9 @@ TIE_TOL = 1.0e-12  # exact correlations this close to the best are ties (roundin
 class ISORatingConfig(StrictModel):
     """ISO/TS 18571 parameters; the defaults are the standard's."""
 
+    # added after stored ratings existed (it changes no number): their digests stay
+    omit_at_default = frozenset({"dtw_engine"})
+
     a0: float = Field(0.05, gt=0, description="inner corridor half-width / max|T|")
     b0: float = Field(0.5, gt=0, description="outer corridor half-width / max|T|")
     corridor_exponent: float = Field(2.0, gt=0, description="kz")
