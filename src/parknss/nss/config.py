@@ -42,8 +42,9 @@ class ModelConfig(StrictModel):
         "reference",
         description="arithmetic of the fused engine: reference (the rounding the stored fits "
         "were made with), fast (the same functions by cheaper kernels, tanh as 2σ(2a)-1; "
-        "rounded differently, measured against float64 in docs/nss.md) or native (fast's "
-        "formulation with the per-step loops in C built for this machine; float32 only)",
+        "rounded differently, measured against float64 in docs/nss.md) or native (the "
+        "reference formulation in C built for this machine, the per-step loops, their "
+        "gradients and the output net; float32 only; rounded its own way)",
     )
 
 
