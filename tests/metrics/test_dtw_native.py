@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers.cbuild import no_c_compiler
 from parknss.errors import ParknssError
 from parknss.metrics import dtw_native
 from parknss.metrics.iso18571 import ISORatingConfig, dtw_path_sums, rate, warping_sums
@@ -50,12 +51,7 @@ def test_bad_input_is_refused_like_the_sweep():
 
 
 def test_without_a_compiler_auto_is_the_sweep_and_native_one_line(monkeypatch, tmp_path):
-    monkeypatch.setenv("PARKNSS_CACHE", str(tmp_path))
-    monkeypatch.setenv("CC", "")
-    monkeypatch.setenv("PATH", str(tmp_path))
-    dtw_native.library.cache_clear()
-    dtw_native.available.cache_clear()
-    try:
+    with no_c_compiler(monkeypatch, tmp_path, dtw_native.library, dtw_native.available):
         t = np.linspace(0.0, 4.0, 400)
         m, p = np.sin(t), np.sin(t - 0.2)
         assert not dtw_native.available()
@@ -64,6 +60,3 @@ def test_without_a_compiler_auto_is_the_sweep_and_native_one_line(monkeypatch, t
         with pytest.raises(ParknssError, match=r"no C compiler.*dtw_engine numpy") as e:
             rate(m, p, 0.01, ISORatingConfig(dtw_engine="native"))
         assert "\n" not in str(e.value)
-    finally:
-        dtw_native.library.cache_clear()
-        dtw_native.available.cache_clear()

@@ -158,15 +158,10 @@ def test_native_training_in_float64_is_refused_by_the_config():
 
 
 def test_no_compiler_is_one_line_naming_the_way_out(monkeypatch, tmp_path):
+    from helpers.cbuild import no_c_compiler
     from parknss.nss import fused_native
 
-    monkeypatch.setenv("PARKNSS_CACHE", str(tmp_path))  # nothing built here yet
-    monkeypatch.setenv("CC", "")
-    monkeypatch.setenv("PATH", str(tmp_path))  # no gcc, no cc
-    fused_native.library.cache_clear()
-    try:
+    with no_c_compiler(monkeypatch, tmp_path, fused_native.library):
         with pytest.raises(ParknssError, match=r"no C compiler.*fused_kernels=reference") as e:
             fused_native.library()
         assert "\n" not in str(e.value)
-    finally:
-        fused_native.library.cache_clear()
